@@ -1,0 +1,109 @@
+"""The asset record every generator returns: visual parts, collision parts and named task frames."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Optional
+
+import numpy as np
+import trimesh
+
+GPU_CONVEX_VERTEX_LIMIT = 64
+"""PhysX cooks GPU-compatible convex hulls with at most 64 vertices."""
+
+
+@dataclass(frozen=True)
+class VisualPart:
+    mesh: trimesh.Trimesh
+    color: tuple[float, float, float, float]
+    roughness: float = 0.8
+    metallic: float = 0.0
+    flat_shading: bool = True
+    """Faceted look (per-face normals) instead of smooth vertex normals."""
+    texture: Optional[str] = None
+    """Name of a ground texture (``procgen.textures.GROUND_KINDS``) tiled by ``uv``."""
+    uv: Optional[np.ndarray] = None
+
+
+@dataclass(frozen=True)
+class CollisionPart:
+    mesh: trimesh.Trimesh
+    convex: bool = True
+    """False only for static triangle meshes (terrain); dynamic bodies use convex parts."""
+
+
+@dataclass(frozen=True)
+class Asset:
+    """A generated or loaded object, in its own frame (metres).
+
+    Dynamic objects are centred on their centre of mass. ``frames`` holds task frames as 4x4 poses in the
+    asset frame (e.g. a hole entrance); ``info`` holds scalar facts (sizes, symmetry order, ...).
+    """
+
+    name: str
+    visual_parts: tuple[VisualPart, ...]
+    collision_parts: tuple[CollisionPart, ...]
+    density: float = 1000.0
+    frames: Mapping[str, np.ndarray] = field(default_factory=dict)
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def visual_mesh(self) -> trimesh.Trimesh:
+        meshes = [p.mesh for p in self.visual_parts]
+        return meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
+
+    @property
+    def collision_vertices(self) -> np.ndarray:
+        return np.concatenate([p.mesh.vertices for p in self.collision_parts])
+
+    def mass_properties(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Mass, centre of mass and inertia tensor (about the centre of mass) of the watertight visual solid.
+
+        Overlapping convex collision parts would double-count mass, so dynamic bodies take their inertia
+        from the visual solid instead.
+        """
+        mesh = self.visual_mesh
+        if not mesh.is_volume:
+            raise ValueError(f"{self.name}: visual mesh is not a closed volume; cannot compute its mass")
+        props = trimesh.triangles.mass_properties(mesh.triangles, density=self.density)
+        return float(props.mass), np.asarray(props.center_mass), np.asarray(props.inertia)
+
+
+def convex_part(points: np.ndarray) -> CollisionPart:
+    """Convex hull of ``points`` as a collision part."""
+    return CollisionPart(trimesh.convex.convex_hull(np.asarray(points, dtype=np.float64)), convex=True)
+
+
+def box_mesh(half_size, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
+    mesh = trimesh.creation.box(extents=2 * np.asarray(half_size, dtype=np.float64))
+    mesh.apply_translation(center)
+    return mesh
+
+
+def cylinder_mesh(radius: float, length: float, sections: int, center=(0.0, 0.0, 0.0), axis: str = "z") -> trimesh.Trimesh:
+    mesh = trimesh.creation.cylinder(radius=radius, height=length, sections=sections)
+    if axis == "x":
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    elif axis == "y":
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    mesh.apply_translation(center)
+    return mesh
+
+
+def translation_frame(position) -> np.ndarray:
+    frame = np.eye(4)
+    frame[:3, 3] = position
+    return frame
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """4x4 pose at ``eye`` whose x axis points at ``target``, z axis as close to ``up`` as possible (SAPIEN camera convention)."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    left = np.cross(up, forward)
+    left /= np.linalg.norm(left)
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([forward, left, np.cross(forward, left)], axis=1)
+    pose[:3, 3] = eye
+    return pose

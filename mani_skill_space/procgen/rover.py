@@ -1,0 +1,101 @@
+"""A planetary rover that carries the arm, with an open cargo bin on its rear deck.
+
+Built from boxes and cylinders, so every collision part is an exact convex primitive. World frame: origin on
+the ground directly below the arm base, x forward, z up. The arm base sits 0.25 m above the ground (the
+reference mount height), low enough for the Panda to pick samples off the ground in front of the rover.
+"""
+
+from __future__ import annotations
+
+from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, cylinder_mesh, look_at, translation_frame
+
+ARM_MOUNT_HEIGHT = 0.25
+DECK_HEIGHT = 0.20
+CHASSIS_X = (-0.95, 0.25)
+CHASSIS_HALF_WIDTH = 0.32
+CHASSIS_THICKNESS = 0.10
+WHEEL_RADIUS = 0.11
+WHEEL_WIDTH = 0.08
+WHEEL_X = (-0.78, -0.35, 0.08)
+WHEEL_Y = 0.40
+PEDESTAL_RADIUS = 0.075
+PEDESTAL_GAP = 0.002
+"""The pedestal stops just short of the arm base so the fixed base link never registers contact."""
+
+BIN_CENTRE_XY = (-0.6, 0.0)
+BIN_INNER_HALF_SIZE = (0.15, 0.17)
+BIN_INNER_HEIGHT = 0.12
+BIN_WALL = 0.012
+
+BASE_CAMERA_EYE = (0.24, 0.0, 0.34)
+BASE_CAMERA_TARGET = (0.62, 0.0, 0.0)
+
+WHITE = (0.86, 0.86, 0.83, 1.0)
+DARK = (0.13, 0.13, 0.14, 1.0)
+GOLD = (0.83, 0.64, 0.25, 1.0)
+ALUMINIUM = (0.72, 0.74, 0.77, 1.0)
+
+
+def make_rover(wheel_sections: int = 20) -> Asset:
+    """The rover: chassis, six wheels on side rails, arm pedestal, base-camera post and the cargo bin.
+
+    Frames: ``arm_mount`` (arm base), ``bin`` (centre of the bin's inner floor), ``base_camera`` (a look-at
+    pose, SAPIEN camera convention: x forward, z up).
+    """
+    parts: list[tuple[object, tuple, float, float]] = []  # (mesh, colour, roughness, metallic)
+
+    chassis_centre = ((CHASSIS_X[0] + CHASSIS_X[1]) / 2, 0.0, DECK_HEIGHT - CHASSIS_THICKNESS / 2)
+    chassis_half = ((CHASSIS_X[1] - CHASSIS_X[0]) / 2, CHASSIS_HALF_WIDTH, CHASSIS_THICKNESS / 2)
+    parts.append((box_mesh(chassis_half, chassis_centre), WHITE, 0.6, 0.0))
+    parts.append((box_mesh((0.5, CHASSIS_HALF_WIDTH - 0.03, 0.004), (-0.3, 0.0, DECK_HEIGHT - 0.06)), GOLD, 0.4, 0.6))
+
+    rail_x = (WHEEL_X[0] + WHEEL_X[-1]) / 2
+    rail_half_length = (WHEEL_X[-1] - WHEEL_X[0]) / 2
+    for side in (-1, 1):
+        parts.append((box_mesh((rail_half_length, 0.02, 0.015), (rail_x, side * (WHEEL_Y - 0.05), WHEEL_RADIUS + 0.04)), DARK, 0.5, 0.3))
+        for x in WHEEL_X:
+            wheel = cylinder_mesh(WHEEL_RADIUS, WHEEL_WIDTH, wheel_sections, (x, side * WHEEL_Y, WHEEL_RADIUS), axis="y")
+            parts.append((wheel, DARK, 0.9, 0.0))
+
+    pedestal_height = ARM_MOUNT_HEIGHT - DECK_HEIGHT - PEDESTAL_GAP
+    pedestal = cylinder_mesh(PEDESTAL_RADIUS, pedestal_height, wheel_sections, (0.0, 0.0, DECK_HEIGHT + pedestal_height / 2))
+    parts.append((pedestal, ALUMINIUM, 0.4, 0.6))
+
+    camera_post_height = BASE_CAMERA_EYE[2] - DECK_HEIGHT - 0.02
+    parts.append((box_mesh((0.015, 0.015, camera_post_height / 2), (BASE_CAMERA_EYE[0] - 0.03, 0.0, DECK_HEIGHT + camera_post_height / 2)), DARK, 0.6, 0.2))
+    parts.append((box_mesh((0.02, 0.04, 0.02), (BASE_CAMERA_EYE[0] - 0.02, 0.0, BASE_CAMERA_EYE[2])), DARK, 0.3, 0.2))
+
+    parts.append((box_mesh((0.065, 0.3, 0.05), (-0.87, 0.0, DECK_HEIGHT + 0.05)), GOLD, 0.4, 0.6))
+    parts.append((box_mesh((0.012, 0.012, 0.15), (-0.87, 0.24, DECK_HEIGHT + 0.25)), DARK, 0.6, 0.2))
+    parts.append((cylinder_mesh(0.06, 0.01, wheel_sections, (-0.87, 0.24, DECK_HEIGHT + 0.41)), WHITE, 0.5, 0.1))
+
+    for mesh in _bin_meshes():
+        parts.append((mesh, ALUMINIUM, 0.35, 0.7))
+
+    bin_floor = (BIN_CENTRE_XY[0], BIN_CENTRE_XY[1], DECK_HEIGHT + BIN_WALL)
+    return Asset(
+        name="rover",
+        visual_parts=tuple(VisualPart(m, c, roughness=r, metallic=mt) for m, c, r, mt in parts),
+        collision_parts=tuple(CollisionPart(m) for m, *_ in parts),
+        frames={
+            "arm_mount": translation_frame((0.0, 0.0, ARM_MOUNT_HEIGHT)),
+            "bin": translation_frame(bin_floor),
+            "base_camera": look_at(BASE_CAMERA_EYE, BASE_CAMERA_TARGET),
+        },
+        info={"bin_inner_half_size": (*BIN_INNER_HALF_SIZE, BIN_INNER_HEIGHT / 2), "bin_inner_height": BIN_INNER_HEIGHT},
+    )
+
+
+def _bin_meshes():
+    """Floor and four walls of an open box resting on the deck."""
+    cx, cy = BIN_CENTRE_XY
+    hx, hy = BIN_INNER_HALF_SIZE
+    w = BIN_WALL
+    floor_z = DECK_HEIGHT + w / 2
+    wall_z = DECK_HEIGHT + w + BIN_INNER_HEIGHT / 2
+    wall_half_height = BIN_INNER_HEIGHT / 2
+    yield box_mesh((hx + w, hy + w, w / 2), (cx, cy, floor_z))
+    for side in (-1, 1):
+        yield box_mesh((w / 2, hy + w, wall_half_height), (cx + side * (hx + w / 2), cy, wall_z))
+        yield box_mesh((hx, w / 2, wall_half_height), (cx, cy + side * (hy + w / 2), wall_z))
+
