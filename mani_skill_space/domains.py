@@ -51,8 +51,9 @@ class Domain:
     sky_tint: tuple[float, float, float]
     """Colour of the ambient (sky) light."""
     terrain: Optional[TerrainStyle]
-    """Procedural terrain; None for a plain ground plane or no ground at all (see ``has_ground``)."""
-    has_ground: bool
+    """Procedural terrain; None for plain ground (``ground_texture``) or for no ground at all."""
+    ground_texture: Optional[str]
+    """Texture of the ground: the terrain's, or that of plain ground; None where there is no ground (orbit)."""
     rock_flavour: str
     """Procedural rock style of this domain (``procgen.rock.ROCK_FLAVOURS``)."""
 
@@ -99,11 +100,11 @@ ASTEROID_TERRAIN = TerrainStyle(
 DOMAINS: dict[str, Domain] = {
     d.name: d
     for d in (
-        Domain("moon", 1.62496, 1361.0, 5778.0, "stars", (0.55, 0.55, 0.6), LUNAR_TERRAIN, True, "lunar"),
-        Domain("mars", 3.72076, 729.0, 6250.0, "mars_day", (1.0, 0.78, 0.55), MARTIAN_TERRAIN, True, "martian"),
-        Domain("orbit", 0.0, 1361.0, 5778.0, "orbit_earth_limb", (0.55, 0.65, 0.85), None, False, "lunar"),
-        Domain("earth", 9.80665, 775.0, 5750.0, "earth_day", (0.75, 0.85, 1.0), None, True, "martian"),
-        Domain("asteroid", 0.14219, 190.0, 5778.0, "stars", (0.5, 0.5, 0.55), ASTEROID_TERRAIN, True, "lunar"),
+        Domain("moon", 1.62496, 1361.0, 5778.0, "stars", (0.55, 0.55, 0.6), LUNAR_TERRAIN, LUNAR_TERRAIN.texture, "lunar"),
+        Domain("mars", 3.72076, 729.0, 6250.0, "mars_day", (1.0, 0.78, 0.55), MARTIAN_TERRAIN, MARTIAN_TERRAIN.texture, "martian"),
+        Domain("orbit", 0.0, 1361.0, 5778.0, "orbit_earth_limb", (0.55, 0.65, 0.85), None, None, "lunar"),
+        Domain("earth", 9.80665, 775.0, 5750.0, "earth_day", (0.75, 0.85, 1.0), None, "earth_soil", "martian"),
+        Domain("asteroid", 0.14219, 190.0, 5778.0, "stars", (0.5, 0.5, 0.55), ASTEROID_TERRAIN, ASTEROID_TERRAIN.texture, "lunar"),
     )
 }
 

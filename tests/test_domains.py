@@ -16,10 +16,10 @@ def test_domain_table_matches_the_reference_figures():
 
 
 def test_ground_per_domain():
-    assert DOMAINS["orbit"].terrain is None and not DOMAINS["orbit"].has_ground
-    assert DOMAINS["earth"].terrain is None and DOMAINS["earth"].has_ground
+    assert DOMAINS["orbit"].terrain is None and DOMAINS["orbit"].ground_texture is None
+    assert DOMAINS["earth"].terrain is None and DOMAINS["earth"].ground_texture == "earth_soil"
     for name in ("moon", "mars", "asteroid"):
-        assert DOMAINS[name].terrain is not None
+        assert DOMAINS[name].terrain is not None and DOMAINS[name].ground_texture == DOMAINS[name].terrain.texture
 
 
 def test_sky_per_domain():

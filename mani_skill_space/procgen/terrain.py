@@ -52,6 +52,16 @@ def make_terrain(
     )
 
 
+def make_flat_ground(texture: str, half_extent: float = TERRAIN_HALF_EXTENT) -> Asset:
+    """Plain level ground (visual only: the env gives it an infinite collision plane, cheaper than a mesh)."""
+    axis = np.array([-half_extent, half_extent])
+    x, y = np.meshgrid(axis, axis, indexing="xy")
+    mesh = _grid_mesh(x, y, np.zeros_like(x))
+    uv = np.stack([x.ravel(), y.ravel()], axis=1) * TEXTURE_TILES_PER_METRE
+    visual = VisualPart(mesh, (1.0, 1.0, 1.0, 1.0), roughness=1.0, flat_shading=False, texture=texture, uv=uv)
+    return Asset(name=f"ground_{texture}", visual_parts=(visual,), collision_parts=(), info={"half_extent": half_extent})
+
+
 def _smoothstep(t: np.ndarray) -> np.ndarray:
     t = np.clip(t, 0.0, 1.0)
     return t * t * (3 - 2 * t)
