@@ -1,0 +1,19 @@
+"""Task environments; importing this module registers every env id with ManiSkill and gymnasium."""
+
+from mani_skill.utils.registration import REGISTERED_ENVS
+
+from mani_skill_space.envs.base import SpaceManipulationEnv
+from mani_skill_space.envs.sample_collection import SampleCollectionEnv
+
+TASKS: dict[str, type[SpaceManipulationEnv]] = {"SampleCollection-v1": SampleCollectionEnv}
+
+
+def task_class(env_id: str) -> type[SpaceManipulationEnv]:
+    """The env class registered under ``env_id`` (a ``ValueError`` naming our ids if it is not ours)."""
+    if env_id not in TASKS:
+        raise ValueError(f"Unknown env id {env_id!r}; valid choices: {', '.join(TASKS)}")
+    assert REGISTERED_ENVS[env_id].cls is TASKS[env_id]
+    return TASKS[env_id]
+
+
+__all__ = ["SampleCollectionEnv", "SpaceManipulationEnv", "TASKS", "task_class"]

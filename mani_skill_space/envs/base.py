@@ -1,0 +1,273 @@
+"""The base class of every mani-skill-space task: domains, robot mounting, cameras, observations, rewards.
+
+Tasks subclass ``SpaceManipulationEnv`` like ManiSkill tasks subclass ``BaseEnv``, and add:
+- ``SUPPORTED_DOMAINS``, ``SUPPORTED_ASSET_SOURCES``, ``EPISODE_SECONDS``, ``REWARD_TABLE`` class constants;
+- ``_make_mount()``: the static structure carrying the arm (an ``Asset`` with ``arm_mount`` and
+  ``base_camera`` frames);
+- ``_reward_inputs(info)``: one value per ``REWARD_TABLE`` term except the shared penalties.
+The base class reports every reward term in ``info["reward_terms"]`` in all reward modes.
+
+Rotation actions of ``pd_ee_delta_pose``: we keep ManiSkill 3.0.1's controller unchanged so that policies,
+demonstrations and tools behave exactly as on ManiSkill's own tasks. In 3.0.1 a positive rotation action turns
+the TCP the negative way about that axis (ManiSkill issue #1469); ``tests/envs/test_controller_convention.py``
+pins this so an upgrade that fixes it is noticed.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Optional, Union
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.agents.robots import Panda, PandaWristCam
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConfig, SceneConfig, SimConfig
+
+from mani_skill_space.dataset import sky_texture_path
+from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
+from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome
+from mani_skill_space.procgen.asset import Asset, look_at
+from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
+from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.rewards import RewardTable, RewardTerm, action_rate
+
+SENSOR_SIZE = 64
+"""Camera resolution of the reference (64x64); override with ``sensor_configs=dict(width=..., height=...)``."""
+SENSOR_FAR = 25.0
+ENV_SPACING = 2 * TERRAIN_HALF_EXTENT + 2.0
+"""GPU sub-scenes share one physics world: keep each env's terrain clear of its neighbours'."""
+GRASP_MIN_FORCE = 5.0
+"""Grasped = both fingers press on the object with more than 5 N (reference definition)."""
+ARM_CONTACT_LIMIT = 10.0
+"""Contact force (N) on an arm link above which the undesired-contact penalty applies."""
+WRIST_CAMERA_EYE = (0.1, 0.0, -0.07)
+WRIST_CAMERA_TARGET = (0.0, 0.0, 0.12)
+"""Wrist camera in the TCP frame (z = approach direction): beside the hand, looking past the fingertips."""
+
+PENALTY_TERMS = (
+    RewardTerm("action_rate", -1.4),
+    RewardTerm("arm_contact", -0.1),
+)
+"""Shared penalties (reference weights): -0.05 * sum over 7 action dims of the squared action change (max 4
+each, expressed here as a [0, 1] rate times 1.4), and -0.1 while an arm link is pressed with more than 10 N."""
+
+
+class SpaceManipulationEnv(BaseEnv):
+    SUPPORTED_ROBOTS = ["panda", "panda_wristcam"]
+    SUPPORTED_DOMAINS: ClassVar[tuple[str, ...]] = tuple(DOMAINS)
+    SUPPORTED_ASSET_SOURCES: ClassVar[tuple[str, ...]] = ("procedural", "dataset")
+    DEFAULT_DOMAIN: ClassVar[str] = "moon"
+    DEFAULT_ASSET_SOURCE: ClassVar[str] = "procedural"
+    EPISODE_SECONDS: ClassVar[float] = 10.0
+    SIM_FREQ: ClassVar[int] = 100
+    CONTROL_FREQ: ClassVar[int] = 20
+    REWARD_TABLE: ClassVar[RewardTable]
+
+    agent: Union[Panda, PandaWristCam]
+
+    def __init__(
+        self,
+        *args,
+        domain: Optional[str] = None,
+        asset_source: Optional[str] = None,
+        robot_uids: str = "panda",
+        control_mode: str = "pd_ee_delta_pose",
+        robot_init_qpos_noise: float = 0.02,
+        num_envs: int = 1,
+        reconfiguration_freq: Optional[int] = None,
+        **kwargs,
+    ):
+        self.domain = get_domain(domain or self.DEFAULT_DOMAIN, self.SUPPORTED_DOMAINS)
+        self.asset_source = asset_source or self.DEFAULT_ASSET_SOURCE
+        if self.asset_source not in self.SUPPORTED_ASSET_SOURCES:
+            raise ValueError(f"Unknown asset_source {self.asset_source!r}; valid choices: {', '.join(self.SUPPORTED_ASSET_SOURCES)}")
+        if robot_uids not in self.SUPPORTED_ROBOTS:
+            raise ValueError(f"Unsupported robot_uids {robot_uids!r}; valid choices: {', '.join(self.SUPPORTED_ROBOTS)}")
+        self.robot_init_qpos_noise = robot_init_qpos_noise
+        self.mount = self._make_mount()
+        if reconfiguration_freq is None:
+            # Varied geometry: a single (CPU) env rebuilds its objects every episode; parallel envs differ instead.
+            reconfiguration_freq = 1 if num_envs == 1 else 0
+        super().__init__(
+            *args,
+            robot_uids=robot_uids,
+            control_mode=control_mode,
+            num_envs=num_envs,
+            reconfiguration_freq=reconfiguration_freq,
+            **kwargs,
+        )
+
+    # ------------------------------------------------------------------ configuration
+    @classmethod
+    def max_episode_steps(cls) -> int:
+        return round(cls.EPISODE_SECONDS * cls.CONTROL_FREQ)
+
+    @property
+    def _default_sim_config(self):
+        return SimConfig(
+            sim_freq=self.SIM_FREQ,
+            control_freq=self.CONTROL_FREQ,
+            spacing=ENV_SPACING,
+            scene_config=SceneConfig(gravity=self.domain.gravity_vector),
+            default_materials_config=DefaultMaterialsConfig(static_friction=1.0, dynamic_friction=1.0, restitution=0.0),
+            gpu_memory_config=GPUMemoryConfig(
+                max_rigid_contact_count=max(2**19, self.num_envs * 2**12),
+                max_rigid_patch_count=max(2**18, self.num_envs * 2**11),
+            ),
+        )
+
+    @property
+    def _default_sensor_configs(self):
+        return [
+            CameraConfig("base_camera", sapien.Pose(self.mount.frames["base_camera"]), SENSOR_SIZE, SENSOR_SIZE, np.deg2rad(90), 0.01, SENSOR_FAR),
+            CameraConfig(
+                "wrist_camera",
+                sapien.Pose(look_at(WRIST_CAMERA_EYE, WRIST_CAMERA_TARGET, up=(1.0, 0.0, 0.0))),
+                SENSOR_SIZE,
+                SENSOR_SIZE,
+                np.deg2rad(80),
+                0.01,
+                SENSOR_FAR,
+                mount=self.agent.tcp,
+            ),
+        ]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        return CameraConfig("render_camera", sapien.Pose(self._render_camera_pose()), 512, 512, 1.0, 0.01, SENSOR_FAR + 5)
+
+    def _render_camera_pose(self) -> np.ndarray:
+        return look_at((1.3, -1.05, 0.95), (-0.1, 0.0, 0.25))
+
+    # ------------------------------------------------------------------ scene
+    def _make_mount(self) -> Asset:
+        raise NotImplementedError
+
+    def _load_agent(self, options: dict):
+        super()._load_agent(options, sapien.Pose(self.mount.frames["arm_mount"]))
+
+    def _load_domain_scene(self):
+        """Mount, sky, ground and the sun's direction for every env (call first in ``_load_scene``)."""
+        self.mount_actor = build_asset_actor(self.scene, self.mount, "mount", body_type="static")
+        self._sun_directions = [sample_sun_direction(np.random.default_rng(s)) for s in self._asset_seeds()]
+        if self.scene.can_render():
+            self.skydome = build_skydome(self.scene, str(sky_texture_path(self.domain.sky)))
+        if self.domain.terrain is not None:
+            terrains = [make_terrain(s, self.domain.terrain) for s in self._asset_seeds()]
+            self.ground = build_actor_per_env(self.scene, terrains, "terrain", body_type="static")
+        elif self.domain.ground_texture is not None:
+            self.ground = build_flat_ground(self.scene, make_flat_ground(self.domain.ground_texture))
+        else:
+            self.ground = None
+
+    def _asset_seeds(self) -> np.ndarray:
+        """One fresh seed per env from its episode RNG (identical on CPU and GPU for the same episode seed)."""
+        return self._batched_episode_rng.randint(0, 2**31 - 1)
+
+    def _load_lighting(self, options: dict):
+        self.scene.set_ambient_light(self.domain.ambient_color.tolist())
+        for i, direction in enumerate(self._sun_directions):
+            self.scene.add_directional_light(
+                direction.tolist(), self.domain.sun_color.tolist(), shadow=self.enable_shadow, shadow_scale=3.0, scene_idxs=[i]
+            )
+
+    def _initialize_agent(self, env_idx: torch.Tensor):
+        """Rest keyframe plus per-env uniform joint noise (arm joints only; the gripper starts open)."""
+        b = len(env_idx)
+        rest = torch.as_tensor(self.agent.keyframes["rest"].qpos, dtype=torch.float32, device=self.device)
+        noise = self._batched_episode_rng[env_idx].uniform(-1.0, 1.0, size=(rest.shape[0],)) * self.robot_init_qpos_noise
+        qpos = rest.repeat(b, 1) + torch.as_tensor(noise, dtype=torch.float32, device=self.device).reshape(b, -1)
+        qpos[:, self._gripper_joint_indices] = rest[self._gripper_joint_indices]
+        self.agent.reset(qpos)
+        self.agent.robot.set_pose(sapien.Pose(self.mount.frames["arm_mount"]))
+        self._previous_action[env_idx] = 0.0
+        self._current_action[env_idx] = 0.0
+
+    def _after_reconfigure(self, options: dict):
+        action_dim = self.agent.single_action_space.shape[0]
+        self._previous_action = torch.zeros((self.num_envs, action_dim), device=self.device)
+        self._current_action = torch.zeros((self.num_envs, action_dim), device=self.device)
+        gripper = self.agent.controller.controllers["gripper"]
+        self._gripper_joint_indices = gripper.active_joint_indices.to(self.device)
+        arm_joints = self.agent.controller.controllers["arm"].joints
+        self._arm_link_names = [joint.child_link.name for joint in arm_joints]
+        mount = torch.as_tensor(self.mount.frames["arm_mount"], dtype=torch.float32, device=self.device)
+        self._arm_base_position = mount[:3, 3].expand(self.num_envs, 3)
+        self._arm_base_rotation = mount[:3, :3].expand(self.num_envs, 3, 3)
+        self._wrist_link_index = int(torch.as_tensor(gripper.joints[0].parent_link.index).flatten()[0])
+
+    # ------------------------------------------------------------------ step
+    def _step_action(self, action):
+        action = super()._step_action(action)
+        if isinstance(action, torch.Tensor):
+            low, high = self._action_bounds()
+            self._previous_action = self._current_action
+            self._current_action = torch.clamp(action.float().reshape(self.num_envs, -1), low, high)
+        return action
+
+    def _action_bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
+        space = self.agent.single_action_space
+        return (torch.as_tensor(space.low, device=self.device), torch.as_tensor(space.high, device=self.device))
+
+    def get_info(self) -> dict:
+        info = super().get_info()
+        inputs = {**self._reward_inputs(info), **self._penalty_inputs()}
+        info["reward_terms"] = self.REWARD_TABLE.weighted(inputs)
+        return info
+
+    def _penalty_inputs(self) -> dict[str, torch.Tensor]:
+        low, high = self._action_bounds()
+        forces = self.agent.robot.get_net_contact_forces(self._arm_link_names)
+        return {
+            "action_rate": action_rate(self._current_action, self._previous_action, low, high),
+            "arm_contact": (torch.linalg.norm(forces, dim=-1).amax(dim=-1) > ARM_CONTACT_LIMIT).float(),
+        }
+
+    def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
+        raise NotImplementedError
+
+    def is_grasping(self, actor) -> torch.Tensor:
+        return self.agent.is_grasping(actor, min_force=GRASP_MIN_FORCE)
+
+    # ------------------------------------------------------------------ observations
+    def tcp_frame(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """World position (n, 3) and rotation matrix (n, 3, 3) of the TCP."""
+        pose = self.agent.tcp.pose
+        return pose.p, rotation_matrix(pose.q)
+
+    def _get_obs_extra(self, info: dict) -> dict[str, torch.Tensor]:
+        """Observations every task shares; tasks extend this with ``super()._get_obs_extra(info)``."""
+        return self._shared_obs_extra(*self.tcp_frame())
+
+    def _shared_obs_extra(self, tcp_position: torch.Tensor, tcp_rotation: torch.Tensor) -> dict[str, torch.Tensor]:
+        position, rotation = relative_pose(self._arm_base_position, self._arm_base_rotation, tcp_position, tcp_rotation)
+        obs = dict(
+            tcp_pos=position,
+            tcp_rot6d=rotation_6d(rotation),
+            gripper_opening=self.gripper_opening().unsqueeze(-1),
+            time_remaining=self.time_remaining().unsqueeze(-1),
+        )
+        if self.obs_mode_struct.use_state:
+            obs["wrist_wrench"] = self.wrist_wrench()
+        return obs
+
+    def gripper_opening(self) -> torch.Tensor:
+        """Mean finger opening in [0, 1] (0 = closed, 1 = open), from the gripper joints' limits."""
+        qpos = self.agent.robot.get_qpos()[:, self._gripper_joint_indices]
+        limits = self.agent.robot.get_qlimits()[:, self._gripper_joint_indices]
+        return ((qpos - limits[..., 0]) / (limits[..., 1] - limits[..., 0])).mean(dim=-1)
+
+    def time_remaining(self) -> torch.Tensor:
+        limit = self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.max_episode_steps()
+        return 1.0 - self.elapsed_steps.float() / limit
+
+    def wrist_wrench(self) -> torch.Tensor:
+        """Spatial force (force, torque) the wrist joint transmits to the hand: what a wrist F/T sensor measures."""
+        return self.agent.robot.get_link_incoming_joint_forces()[:, self._wrist_link_index].to(self.device)
+
+
+def build_samples(env: SpaceManipulationEnv, assets: list[Asset], name: str) -> Any:
+    """Per-env dynamic objects placed out of the way; ``_initialize_episode`` poses them."""
+    return build_actor_per_env(env.scene, assets, name, body_type="dynamic", initial_pose=sapien.Pose(p=[0, 0, 2.0]))

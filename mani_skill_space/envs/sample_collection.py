@@ -1,0 +1,176 @@
+from typing import Any
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.pose import Pose
+
+from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, build_samples
+from mani_skill_space.envs.building import padded_points
+from mani_skill_space.procgen.rock import make_rock
+from mani_skill_space.procgen.rover import make_rover
+from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
+
+SAMPLE_X_RANGE = (0.45, 0.65)
+SAMPLE_Y_RANGE = (-0.2, 0.2)
+"""Sample position on the ground, arm frame. The reference's 0.55 +- 0.2 x +-0.3 m reaches beyond what a Panda
+mounted 0.25 m above the ground can grasp top-down, so the ranges are narrowed to its reachable workspace."""
+SAMPLE_DROP_CLEARANCE = 0.002
+LIFT_BAND = (0.25, 0.75)
+RESTING_SPEED = 0.1
+"""A sample moving slower than this (m/s) counts as resting in the bin."""
+
+REWARD_TABLE = RewardTable(
+    (
+        RewardTerm("reach", 1.0, sigma=0.25),
+        RewardTerm("grasp", 4.0),
+        RewardTerm("lift", 8.0, sigma=0.1),
+        RewardTerm("transport", 64.0, sigma=0.333),
+        *PENALTY_TERMS,
+    )
+)
+
+
+@register_env("SampleCollection-v1", max_episode_steps=150)
+class SampleCollectionEnv(SpaceManipulationEnv):
+    """
+    **Task Description:**
+    A Panda arm mounted on a planetary rover picks a geological sample (a rock, or a sealed sample tube) off
+    the ground in front of the rover and drops it into the cargo bin on the rover's rear deck, behind the arm.
+    Domains: moon, mars, earth, asteroid (gravity, sunlight, sky and terrain follow the domain). 7.5 s episodes:
+    150 control steps at 20 Hz, physics at 100 Hz.
+
+    **Randomizations:**
+    - the sample (during reconfiguration, one per parallel env): `asset_source="procedural"` gives a
+      procedural rock of about 6 x 6 x 4 cm in the domain's rock flavour (density 2000 kg/m^3);
+      `asset_source="dataset"` gives the 33 x 170 mm sample tube
+    - the terrain around the rover (craters, dunes, boulders) and the sun direction (during reconfiguration)
+    - the sample's position on the ground: x in [0.45, 0.65] m, y in [-0.2, 0.2] m in front of the arm base;
+      rocks get a uniformly random orientation, tubes lie flat with a random heading and roll
+    - the arm's initial joint positions: rest pose plus uniform noise of +-`robot_init_qpos_noise` rad
+
+    **Success Conditions:**
+    - the sample's centre of mass is inside the bin's inner volume (below its rim)
+    - the sample is not grasped (released) and resting (speed below 0.1 m/s)
+
+    **Reward:** dense terms (see `REWARD_TABLE`, reported per step in `info["reward_terms"]`): reach
+    1 * (1 - tanh(d_tcp_sample / 0.25)), grasp 4 (both fingers pressing > 5 N), lift 8 while the sample is
+    0.25-0.75 m above its start height (tanh falloff 0.1 m outside the band), transport
+    64 * (1 - tanh(d_sample_bin / 0.333)), penalties -1.4 * action rate and -0.1 per step of arm contact > 10 N;
+    success gives the maximum (77). `normalized_dense` maps [-1.5, 77] onto [0, 1]; `sparse` is the success flag.
+    """
+
+    SUPPORTED_DOMAINS = ("moon", "mars", "earth", "asteroid")
+    DEFAULT_DOMAIN = "mars"
+    EPISODE_SECONDS = 7.5
+    REWARD_TABLE = REWARD_TABLE
+
+    def _make_mount(self):
+        return make_rover()
+
+    def _load_scene(self, options: dict):
+        self._load_domain_scene()
+        seeds = self._asset_seeds()
+        if self.asset_source == "procedural":
+            assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
+        else:
+            assets = [load_dataset_object("sample_tube")] * self.num_envs
+        self.sample = build_samples(self, assets, "sample")
+        self._sample_points = padded_points([a.collision_vertices for a in assets], self.device)
+        self._is_tube = self.asset_source == "dataset"
+        bin_frame = self.mount.frames["bin"]
+        self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
+        self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
+
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        with torch.device(self.device):
+            b = len(env_idx)
+            rng = self._batched_episode_rng[env_idx]
+            self._initialize_agent(env_idx)
+            xy = np.stack([rng.uniform(*SAMPLE_X_RANGE), rng.uniform(*SAMPLE_Y_RANGE)], axis=-1)
+            quat = torch.as_tensor(self._sample_orientations(rng), dtype=torch.float32)
+            points = self._sample_points[env_idx]
+            lowest = torch.einsum("bij,bnj->bni", quaternion_to_matrix(quat), points)[..., 2].amin(dim=1)
+            position = torch.zeros((b, 3))
+            position[:, :2] = torch.as_tensor(xy, dtype=torch.float32)
+            position[:, 2] = SAMPLE_DROP_CLEARANCE - lowest
+            self.sample.set_pose(Pose.create_from_pq(position, quat))
+            self._sample_start_height[env_idx] = position[:, 2]
+
+    def _sample_orientations(self, rng) -> np.ndarray:
+        """wxyz quaternions: uniformly random for rocks; tubes (axis x) lie flat with random heading and roll."""
+        if self._is_tube:
+            yaw, roll = rng.uniform(-np.pi, np.pi), rng.uniform(-np.pi, np.pi)
+            half_yaw, half_roll = yaw / 2, roll / 2
+            # q = yaw about z, then roll about the tube's own x axis
+            return np.stack(
+                [
+                    np.cos(half_yaw) * np.cos(half_roll),
+                    np.cos(half_yaw) * np.sin(half_roll),
+                    np.sin(half_yaw) * np.sin(half_roll),
+                    np.sin(half_yaw) * np.cos(half_roll),
+                ],
+                axis=-1,
+            )
+        quat = rng.normal(size=(4,))
+        return quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+
+    def _after_reconfigure(self, options: dict):
+        super()._after_reconfigure(options)
+        self._sample_start_height = torch.zeros(self.num_envs, device=self.device)
+
+    @property
+    def bin_target(self) -> torch.Tensor:
+        """Centre of the bin's inner volume, world frame, (num_envs, 3)."""
+        centre = self._bin_floor + torch.tensor([0.0, 0.0, 1.0], device=self.device) * self._bin_half_size[2]
+        return centre.expand(self.num_envs, 3)
+
+    def evaluate(self):
+        offset = self.sample.pose.p - self._bin_floor
+        half = self._bin_half_size
+        is_in_bin = (
+            (offset[:, 0].abs() <= half[0]) & (offset[:, 1].abs() <= half[1]) & (offset[:, 2] >= 0) & (offset[:, 2] <= 2 * half[2])
+        )
+        is_grasped = self.is_grasping(self.sample)
+        is_resting = torch.linalg.norm(self.sample.linear_velocity, dim=-1) < RESTING_SPEED
+        return dict(
+            success=is_in_bin & ~is_grasped & is_resting,
+            is_in_bin=is_in_bin,
+            is_grasped=is_grasped,
+            is_resting=is_resting,
+        )
+
+    def _get_obs_extra(self, info: dict):
+        tcp_position, tcp_rotation = self.tcp_frame()
+        obs = self._shared_obs_extra(tcp_position, tcp_rotation)
+        obs["is_grasped"] = info["is_grasped"].float().unsqueeze(-1)
+        if self.obs_mode_struct.use_state:
+            sample = self.sample.pose
+            position, rotation = relative_pose(tcp_position, tcp_rotation, sample.p, rotation_matrix(sample.q))
+            obs.update(
+                sample_pos_in_tcp=position,
+                sample_rot6d_in_tcp=rotation_6d(rotation),
+                sample_to_bin=self.bin_target - sample.p,
+                sample_height=(sample.p[:, 2] - self._sample_start_height).unsqueeze(-1),
+            )
+        return obs
+
+    def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
+        sample = self.sample.pose.p
+        lift = sample[:, 2] - self._sample_start_height
+        return dict(
+            reach=torch.linalg.norm(self.agent.tcp.pose.p - sample, dim=-1),
+            grasp=info["is_grasped"],
+            lift=band_distance(lift, *LIFT_BAND),
+            transport=torch.linalg.norm(self.bin_target - sample, dim=-1),
+        )
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))

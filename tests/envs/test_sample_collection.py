@@ -1,0 +1,267 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+from mani_skill.utils.registration import REGISTERED_ENVS
+
+import mani_skill_space
+from mani_skill_space.envs import SampleCollectionEnv, task_class
+
+ENV_ID = "SampleCollection-v1"
+DOMAINS = SampleCollectionEnv.SUPPORTED_DOMAINS
+SOURCES = SampleCollectionEnv.SUPPORTED_ASSET_SOURCES
+
+
+def make(**kwargs):
+    kwargs.setdefault("render_backend", "none")
+    kwargs.setdefault("obs_mode", "state")
+    return gym.make(ENV_ID, **kwargs)
+
+
+def test_env_id_is_registered_with_the_reference_episode_duration():
+    assert ENV_ID in mani_skill_space.ENV_IDS
+    assert REGISTERED_ENVS[ENV_ID].cls is SampleCollectionEnv is task_class(ENV_ID)
+    assert gym.spec(ENV_ID).max_episode_steps == SampleCollectionEnv.max_episode_steps() == 150
+    assert SampleCollectionEnv.max_episode_steps() / SampleCollectionEnv.CONTROL_FREQ == 7.5
+
+
+def test_default_control_mode_is_ee_delta_pose_and_other_modes_work():
+    env = make()
+    assert env.unwrapped.control_mode == "pd_ee_delta_pose"
+    assert env.action_space.shape == (7,)
+    env.close()
+    for mode in ("pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos"):
+        env = make(control_mode=mode)
+        env.reset(seed=0)
+        _, reward, *_ = env.step(env.action_space.sample())
+        assert torch.isfinite(reward).all()
+        env.close()
+
+
+@pytest.mark.parametrize("obs_mode", ["state", "rgbd"])
+@pytest.mark.parametrize("asset_source", SOURCES)
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_reset_and_step_in_every_domain_and_asset_source(domain, asset_source, obs_mode):
+    env = make(domain=domain, asset_source=asset_source, obs_mode=obs_mode, render_backend="cpu" if obs_mode != "state" else "none")
+    obs, info = env.reset(seed=3)
+    for _ in range(3):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert reward.shape == (1,) and torch.isfinite(reward).all()
+    assert set(info["reward_terms"]) == set(SampleCollectionEnv.REWARD_TABLE.names)
+    assert all(torch.isfinite(v).all() for v in info["reward_terms"].values())
+    if obs_mode == "state":
+        assert obs.ndim == 2 and obs.shape[0] == 1 and torch.isfinite(obs).all()
+    else:
+        assert set(obs["sensor_data"]) == {"base_camera", "wrist_camera"}
+    env.close()
+
+
+def test_cameras_are_base_and_wrist_rgbd_at_64_by_64():
+    env = make(obs_mode="rgbd", render_backend="cpu")
+    obs, _ = env.reset(seed=0)
+    for camera in ("base_camera", "wrist_camera"):
+        data = obs["sensor_data"][camera]
+        assert data["rgb"].shape == (1, 64, 64, 3) and data["rgb"].dtype == torch.uint8
+        assert data["depth"].shape == (1, 64, 64, 1) and data["depth"].dtype == torch.int16
+        assert data["rgb"].float().std() > 5  # not a blank image
+    env.close()
+
+
+def test_sensor_configs_override_the_camera_size():
+    env = make(obs_mode="rgb", render_backend="cpu", sensor_configs=dict(width=48, height=32))
+    obs, _ = env.reset(seed=0)
+    assert obs["sensor_data"]["base_camera"]["rgb"].shape == (1, 32, 48, 3)
+    env.close()
+    env = make(obs_mode="rgb", render_backend="cpu", sensor_configs=dict(wrist_camera=dict(width=96, height=96)))
+    obs, _ = env.reset(seed=0)
+    assert obs["sensor_data"]["wrist_camera"]["rgb"].shape == (1, 96, 96, 3)
+    assert obs["sensor_data"]["base_camera"]["rgb"].shape == (1, 64, 64, 3)
+    env.close()
+
+
+def test_wrist_camera_robot_adds_its_hand_camera():
+    env = make(robot_uids="panda_wristcam", obs_mode="rgb", render_backend="cpu")
+    obs, _ = env.reset(seed=0)
+    assert set(obs["sensor_data"]) == {"base_camera", "wrist_camera", "hand_camera"}
+    env.close()
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_scene_gravity_is_the_domain_gravity(domain):
+    env = make(domain=domain)
+    gravity = env.unwrapped.scene.px.config.gravity
+    np.testing.assert_allclose(gravity, [0, 0, -mani_skill_space.domains.DOMAINS[domain].gravity], rtol=1e-6)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(domain="orbit"), "valid choices: moon, mars, earth, asteroid"),
+        (dict(domain="venus"), "valid choices: moon, mars, earth, asteroid"),
+        (dict(asset_source="cad"), "valid choices: procedural, dataset"),
+        (dict(robot_uids="fetch"), "valid choices: panda, panda_wristcam"),
+    ],
+)
+def test_bad_kwargs_raise_errors_naming_the_valid_choices(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make(**kwargs)
+
+
+def _sample_state(env):
+    u = env.unwrapped
+    return u._sample_points.clone(), u.sample.pose.raw_pose.clone(), u.agent.robot.get_qpos().clone()
+
+
+def test_same_seed_gives_the_same_rock_and_initial_state():
+    a, b = make(), make()
+    obs_a, _ = a.reset(seed=11)
+    obs_b, _ = b.reset(seed=11)
+    for x, y in zip(_sample_state(a), _sample_state(b)):
+        torch.testing.assert_close(x, y, rtol=0, atol=0)
+    torch.testing.assert_close(obs_a, obs_b, rtol=0, atol=0)
+    b.reset(seed=12)
+    assert not torch.equal(a.unwrapped.sample.pose.raw_pose, b.unwrapped.sample.pose.raw_pose)
+    a.close(), b.close()
+
+
+def test_same_seed_and_actions_give_the_same_rollout_on_cpu():
+    actions = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (25, 1, 7)), dtype=torch.float32)
+    rollouts = []
+    for _ in range(2):
+        env = make()
+        obs, _ = env.reset(seed=4)
+        trajectory = [obs]
+        for action in actions:
+            obs, reward, *_ = env.step(action)
+            trajectory += [obs, reward]
+        rollouts.append(torch.cat([t.reshape(-1) for t in trajectory]))
+        env.close()
+    torch.testing.assert_close(rollouts[0], rollouts[1], rtol=0, atol=0)
+
+
+def test_reconfiguration_resamples_the_rock():
+    env = make()
+    env.reset(seed=1)
+    first = env.unwrapped._sample_points.clone()
+    env.reset(seed=2)
+    assert env.unwrapped._sample_points.shape != first.shape or not torch.equal(env.unwrapped._sample_points, first)
+    env.close()
+    env = make(reconfiguration_freq=0)
+    env.reset(seed=1)
+    kept = env.unwrapped._sample_points.clone()
+    env.reset(seed=2)
+    torch.testing.assert_close(env.unwrapped._sample_points, kept)
+    env.close()
+
+
+def _place_sample(env, position, velocity=(0.0, 0.0, 0.0)):
+    u = env.unwrapped
+    u.sample.set_pose(sapien.Pose(p=position))
+    u.sample.set_linear_velocity(torch.tensor([velocity]))
+    u.sample.set_angular_velocity(torch.zeros(1, 3))
+    return u.evaluate()
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+def test_sample_resting_in_the_bin_is_success_and_on_the_ground_is_not(asset_source):
+    env = make(asset_source=asset_source)
+    env.reset(seed=0)
+    u = env.unwrapped
+    inside = (u.bin_target[0] - torch.tensor([0, 0, 0.03])).tolist()
+    assert _place_sample(env, inside)["success"].item()
+    assert not _place_sample(env, inside, velocity=(0, 0, -0.5))["success"].item()  # still falling: not resting
+    assert not _place_sample(env, [0.55, 0.0, 0.03])["success"].item()
+    assert not _place_sample(env, (u.bin_target[0] + torch.tensor([0, 0, 0.2])).tolist())["success"].item()  # above the rim
+    assert not _place_sample(env, (u.bin_target[0] + torch.tensor([0.3, 0, 0])).tolist())["success"].item()  # beside the bin
+    env.close()
+
+
+def test_success_gives_the_maximum_reward_in_every_reward_mode():
+    for mode, expected in [("dense", 77.0), ("normalized_dense", 1.0), ("sparse", 1.0)]:
+        env = make(reward_mode=mode)
+        env.reset(seed=0)
+        u = env.unwrapped
+        inside = (u.bin_target[0] - torch.tensor([0, 0, 0.03])).tolist()
+        _place_sample(env, inside)
+        info = u.get_info()
+        reward = u.get_reward(obs=None, action=torch.zeros(1, 7), info=info)
+        assert info["success"].item()
+        assert reward.item() == pytest.approx(expected)
+        env.close()
+
+
+def test_dense_reward_is_the_sum_of_the_reported_terms_and_normalised_is_in_unit_interval():
+    env = make(reward_mode="dense")
+    env.reset(seed=5)
+    table = SampleCollectionEnv.REWARD_TABLE
+    for _ in range(10):
+        _, reward, _, _, info = env.step(env.action_space.sample())
+        assert not info["success"].item()
+        assert reward.item() == pytest.approx(sum(v.item() for v in info["reward_terms"].values()), abs=1e-5)
+        normalised = table.normalize(reward)
+        assert 0.0 <= normalised.item() <= 1.0
+    env.close()
+
+
+def test_sample_settles_on_the_ground_in_front_of_the_rover():
+    for domain in DOMAINS:
+        env = make(domain=domain)
+        env.reset(seed=2)
+        start = env.unwrapped.sample.pose.p.clone()
+        for _ in range(30):
+            env.step(torch.zeros(1, 7))
+        end = env.unwrapped.sample.pose.p
+        assert 0.0 < end[0, 2].item() < 0.1, domain
+        assert torch.linalg.norm(end[0, :2] - start[0, :2]).item() < 0.08, domain
+        env.close()
+
+
+def test_every_body_really_has_its_collision_shapes():
+    env = make()
+    env.reset(seed=0)
+    u = env.unwrapped
+    for actor, expected in [(u.sample, None), (u.mount_actor, len(u.mount.collision_parts)), (u.ground, 1)]:
+        for entity in actor._objs:
+            body = entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent)
+            shapes = body.get_collision_shapes()
+            assert len(shapes) >= 1 and (expected is None or len(shapes) == expected)
+    env.close()
+
+
+def test_per_env_sample_is_a_merged_actor_in_the_state_registry():
+    env = make()
+    env.reset(seed=0)
+    state = env.unwrapped.get_state_dict()
+    assert "sample" in state["actors"]
+    assert not any(name.startswith("sample-") for name in state["actors"])
+    env.close()
+
+
+def test_state_round_trip_restores_the_observation():
+    env = make(obs_mode="state_dict")
+    env.reset(seed=9)
+    state = env.unwrapped.get_state_dict()
+    obs = env.unwrapped.get_obs()
+    for _ in range(15):
+        env.step(env.action_space.sample())
+    env.unwrapped.set_state_dict(state)
+    restored = env.unwrapped.get_obs()
+    # time and the last physics step's joint forces are not part of the simulation state
+    for group, name in [("agent", "qpos"), ("agent", "qvel"), ("extra", "tcp_pos"), ("extra", "sample_pos_in_tcp"), ("extra", "sample_to_bin")]:
+        torch.testing.assert_close(restored[group][name], obs[group][name], atol=1e-5, rtol=1e-5)
+    env.close()
+
+
+def test_shared_observations_start_at_the_expected_values():
+    env = make(obs_mode="state_dict")
+    obs, _ = env.reset(seed=0)
+    extra = obs["extra"]
+    assert extra["time_remaining"].item() == 1.0
+    assert extra["gripper_opening"].item() == pytest.approx(1.0, abs=0.05)
+    assert extra["tcp_rot6d"].shape == (1, 6) and extra["wrist_wrench"].shape == (1, 6)
+    for _ in range(15):
+        obs, *_ = env.step(torch.zeros(1, 7))
+    assert obs["extra"]["time_remaining"].item() == pytest.approx(1 - 15 / 150)
+    env.close()
