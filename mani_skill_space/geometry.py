@@ -29,3 +29,11 @@ def relative_pose(
     inverse = parent_rotation.transpose(-1, -2)
     position = (inverse @ (child_position - parent_position).unsqueeze(-1)).squeeze(-1)
     return position, inverse @ child_rotation
+
+
+def in_open_box(points: torch.Tensor, floor_centre: torch.Tensor, inner_half_size: torch.Tensor) -> torch.Tensor:
+    """Whether points (n, 3) lie in an axis-aligned open box given by the centre of its floor and its inner half
+    size (hx, hy, half height): within the walls and between the floor and the rim."""
+    offset = points - floor_centre
+    within_walls = (offset[..., :2].abs() <= inner_half_size[..., :2]).all(dim=-1)
+    return within_walls & (offset[..., 2] >= 0) & (offset[..., 2] <= 2 * inner_half_size[..., 2])

@@ -101,7 +101,8 @@ class SpaceManipulationEnv(BaseEnv):
 
     # ------------------------------------------------------------------ configuration
     @classmethod
-    def max_episode_steps(cls) -> int:
+    def nominal_episode_steps(cls) -> int:
+        """EPISODE_SECONDS in control steps (the registered time limit)."""
         return round(cls.EPISODE_SECONDS * cls.CONTROL_FREQ)
 
     @property
@@ -260,7 +261,7 @@ class SpaceManipulationEnv(BaseEnv):
         return ((qpos - limits[..., 0]) / (limits[..., 1] - limits[..., 0])).mean(dim=-1)
 
     def time_remaining(self) -> torch.Tensor:
-        limit = self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.max_episode_steps()
+        limit = self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.nominal_episode_steps()
         return 1.0 - self.elapsed_steps.float() / limit
 
     def wrist_wrench(self) -> torch.Tensor:

@@ -12,7 +12,7 @@ from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, buil
 from mani_skill_space.envs.building import padded_points
 from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.procgen.rover import make_rover
-from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
 
 SAMPLE_X_RANGE = (0.45, 0.65)
@@ -130,11 +130,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
         return centre.expand(self.num_envs, 3)
 
     def evaluate(self):
-        offset = self.sample.pose.p - self._bin_floor
-        half = self._bin_half_size
-        is_in_bin = (
-            (offset[:, 0].abs() <= half[0]) & (offset[:, 1].abs() <= half[1]) & (offset[:, 2] >= 0) & (offset[:, 2] <= 2 * half[2])
-        )
+        is_in_bin = in_open_box(self.sample.pose.p, self._bin_floor, self._bin_half_size)
         is_grasped = self.is_grasping(self.sample)
         is_resting = torch.linalg.norm(self.sample.linear_velocity, dim=-1) < RESTING_SPEED
         return dict(

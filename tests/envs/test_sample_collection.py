@@ -22,8 +22,8 @@ def make(**kwargs):
 def test_env_id_is_registered_with_the_reference_episode_duration():
     assert ENV_ID in mani_skill_space.ENV_IDS
     assert REGISTERED_ENVS[ENV_ID].cls is SampleCollectionEnv is task_class(ENV_ID)
-    assert gym.spec(ENV_ID).max_episode_steps == SampleCollectionEnv.max_episode_steps() == 150
-    assert SampleCollectionEnv.max_episode_steps() / SampleCollectionEnv.CONTROL_FREQ == 7.5
+    assert gym.spec(ENV_ID).max_episode_steps == SampleCollectionEnv.nominal_episode_steps() == 150
+    assert SampleCollectionEnv.nominal_episode_steps() / SampleCollectionEnv.CONTROL_FREQ == 7.5
 
 
 def test_default_control_mode_is_ee_delta_pose_and_other_modes_work():
