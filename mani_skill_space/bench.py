@@ -1,0 +1,162 @@
+"""Speed of our envs against ManiSkill's own tasks, measured in the same run (ratios, not seconds).
+
+    python -m mani_skill_space.bench
+
+Measures env steps/s (random ``pd_ee_delta_pose`` actions, physx_cpu, one env) in state and rgbd-64 modes,
+the time of a reconfigure (scene rebuild), and the generation time of each procedural asset. Each env is
+measured in several interleaved rounds and the median is reported, because these machines are noisy.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import gymnasium as gym
+import tyro
+
+import mani_skill_space
+from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.domains import DOMAINS
+from mani_skill_space.procgen.rock import make_rock
+from mani_skill_space.procgen.rover import make_rover
+from mani_skill_space.procgen.terrain import make_terrain
+
+REFERENCES = {"SampleCollection-v1": "PickCube-v1"}
+"""The ManiSkill task each of our envs is compared with."""
+
+
+@dataclass
+class Args:
+    env_ids: tuple[str, ...] = mani_skill_space.ENV_IDS
+    obs_modes: tuple[str, ...] = ("state", "rgbd")
+    steps: int = 300
+    """Env steps per round in state mode (rgbd rounds use a tenth)."""
+    rounds: int = 3
+    reconfigures: int = 5
+    asset_repeats: int = 20
+    json_path: Optional[Path] = None
+
+
+@dataclass
+class Row:
+    name: str
+    ours: float
+    reference_name: str
+    reference: float
+    unit: str
+    target: str = ""
+
+    @property
+    def ratio(self) -> float:
+        return self.ours / self.reference if self.reference else float("nan")
+
+
+@dataclass
+class Report:
+    rows: list[Row] = field(default_factory=list)
+    assets_ms: dict[str, float] = field(default_factory=dict)
+
+
+def make_env(env_id: str, obs_mode: str):
+    kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sensor_configs=dict(width=64, height=64))
+    if obs_mode == "state":
+        kwargs["render_backend"] = "none"
+    return gym.make(env_id, **kwargs)
+
+
+def steps_per_second(env, steps: int, with_resets: bool = False) -> float:
+    """Random-action env steps per second; like ManiSkill's profiler, either ``env.step`` alone (episode ends
+    ignored) or ``env.step`` plus the resets that episode ends call for (reconfigures included)."""
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if with_resets and bool(terminated.any() or truncated.any()):
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def reconfigure_seconds(env, count: int) -> float:
+    durations = []
+    for seed in range(count):
+        start = time.perf_counter()
+        env.reset(seed=seed, options=dict(reconfigure=True))
+        durations.append(time.perf_counter() - start)
+    return statistics.median(durations)
+
+
+def interleaved_medians(measure: Callable[[str], float], names: tuple[str, str], rounds: int) -> tuple[float, float]:
+    samples = {name: [] for name in names}
+    for _ in range(rounds):
+        for name in names:
+            samples[name].append(measure(name))
+    return tuple(statistics.median(samples[name]) for name in names)
+
+
+def bench_env(env_id: str, args: Args, report: Report) -> None:
+    reference = REFERENCES[env_id]
+    for obs_mode in args.obs_modes:
+        envs = {name: make_env(name, obs_mode) for name in (env_id, reference)}
+        steps = args.steps if obs_mode == "state" else max(10, args.steps // 10)
+        ours, theirs = interleaved_medians(lambda name: steps_per_second(envs[name], steps), (env_id, reference), args.rounds)
+        target = ">= 0.8x" if obs_mode == "state" else ""
+        report.rows.append(Row(f"{env_id} env.step/s ({obs_mode})", ours, reference, theirs, "steps/s", target))
+        if obs_mode == "state":
+            ours, theirs = interleaved_medians(
+                lambda name: steps_per_second(envs[name], 2 * steps, with_resets=True), (env_id, reference), args.rounds
+            )
+            report.rows.append(Row(f"{env_id} (env.step + resets)/s ({obs_mode})", ours, reference, theirs, "steps/s"))
+            ours, theirs = interleaved_medians(lambda name: reconfigure_seconds(envs[name], args.reconfigures), (env_id, reference), 1)
+            report.rows.append(Row(f"{env_id} reconfigure", ours, reference, theirs, "s", "<= 2x"))
+        for env in envs.values():
+            env.close()
+
+
+def asset_generators() -> dict[str, Callable[[int], object]]:
+    generators = {f"rock ({flavour})": (lambda seed, f=flavour: make_rock(seed, f)) for flavour in ("lunar", "martian")}
+    for name in ("moon", "mars", "asteroid"):
+        generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
+    generators["rover"] = lambda seed: make_rover()
+    generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
+    return generators
+
+
+def bench_assets(args: Args, report: Report) -> None:
+    for name, generate in asset_generators().items():
+        start = time.perf_counter()
+        for seed in range(args.asset_repeats):
+            generate(seed)
+        report.assets_ms[name] = 1000 * (time.perf_counter() - start) / args.asset_repeats
+
+
+def format_report(report: Report) -> str:
+    lines = ["| measure | ours | ManiSkill reference | ratio | target |", "|---|---|---|---|---|"]
+    for row in report.rows:
+        lines.append(
+            f"| {row.name} | {row.ours:.3g} {row.unit} | {row.reference_name}: {row.reference:.3g} {row.unit} | {row.ratio:.2f}x | {row.target} |"
+        )
+    lines += ["", "| asset | ms per asset (with collision parts) |", "|---|---|"]
+    lines += [f"| {name} | {ms:.1f} |" for name, ms in report.assets_ms.items()]
+    return "\n".join(lines)
+
+
+def main(args: Args) -> Report:
+    report = Report()
+    for env_id in args.env_ids:
+        bench_env(env_id, args, report)
+    bench_assets(args, report)
+    print(format_report(report))
+    if args.json_path is not None:
+        payload = {"rows": [asdict(r) | {"ratio": r.ratio} for r in report.rows], "assets_ms": report.assets_ms}
+        args.json_path.write_text(json.dumps(payload, indent=1))
+    return report
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
