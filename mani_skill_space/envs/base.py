@@ -204,8 +204,10 @@ class SpaceManipulationEnv(BaseEnv):
         action = super()._step_action(action)
         if isinstance(action, torch.Tensor):
             low, high = self._action_bounds()
-            self._previous_action = self._current_action
-            self._current_action = torch.clamp(action.float().reshape(self.num_envs, -1), low, high)
+            current = torch.clamp(action.float().reshape(self.num_envs, -1), low, high)
+            if current.shape != self._current_action.shape:  # the control mode was switched through the action
+                self._current_action = torch.zeros_like(current)
+            self._previous_action, self._current_action = self._current_action, current
         return action
 
     def _action_bounds(self) -> tuple[torch.Tensor, torch.Tensor]:

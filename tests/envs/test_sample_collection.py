@@ -265,3 +265,13 @@ def test_shared_observations_start_at_the_expected_values():
         obs, *_ = env.step(torch.zeros(1, 7))
     assert obs["extra"]["time_remaining"].item() == pytest.approx(1 - 15 / 150)
     env.close()
+
+
+def test_switching_control_mode_through_the_action_keeps_stepping():
+    env = make()
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    qpos = env.unwrapped.agent.robot.get_qpos()[:, :8]
+    _, reward, *_ = env.step({"control_mode": "pd_joint_pos", "action": qpos})
+    assert env.unwrapped.control_mode == "pd_joint_pos" and torch.isfinite(reward).all()
+    env.close()
