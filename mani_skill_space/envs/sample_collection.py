@@ -3,13 +3,14 @@ from typing import Any
 import numpy as np
 import sapien
 import torch
-from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, build_samples
 from mani_skill_space.envs.building import padded_points
+from mani_skill_space.procgen.resting import resting_orientations
 from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.procgen.rover import make_rover
 from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
@@ -19,7 +20,7 @@ SAMPLE_X_RANGE = (0.45, 0.65)
 SAMPLE_Y_RANGE = (-0.2, 0.2)
 """Sample position on the ground, arm frame. The reference's 0.55 +- 0.2 x +-0.3 m reaches beyond what a Panda
 mounted 0.25 m above the ground can grasp top-down, so the ranges are narrowed to its reachable workspace."""
-SAMPLE_DROP_CLEARANCE = 0.002
+SAMPLE_DROP_CLEARANCE = 0.0005
 LIFT_BAND = (0.25, 0.75)
 RESTING_SPEED = 0.1
 """A sample moving slower than this (m/s) counts as resting in the bin."""
@@ -49,8 +50,8 @@ class SampleCollectionEnv(SpaceManipulationEnv):
       procedural rock of about 6 x 6 x 4 cm in the domain's rock flavour (density 2000 kg/m^3);
       `asset_source="dataset"` gives the 33 x 170 mm sample tube
     - the terrain around the rover (craters, dunes, boulders) and the sun direction (during reconfiguration)
-    - the sample's position on the ground: x in [0.45, 0.65] m, y in [-0.2, 0.2] m in front of the arm base;
-      rocks get a uniformly random orientation, tubes lie flat with a random heading and roll
+    - the sample's position on the ground: x in [0.45, 0.65] m, y in [-0.2, 0.2] m in front of the arm base,
+      resting on a random statically stable face (tubes: lying flat) with a random heading, so it starts at rest
     - the arm's initial joint positions: rest pose plus uniform noise of +-`robot_init_qpos_noise` rad
 
     **Success Conditions:**
@@ -81,7 +82,11 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             assets = [load_dataset_object("sample_tube")] * self.num_envs
         self.sample = build_samples(self, assets, "sample")
         self._sample_points = padded_points([a.collision_vertices for a in assets], self.device)
-        self._is_tube = self.asset_source == "dataset"
+        # a tube lies flat: it never rests on its end caps
+        axis = np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None
+        rests = [resting_orientations(a.collision_vertices, exclude_axis=axis) for a in assets]
+        self._resting_counts = torch.tensor([len(r) for r in rests], device=self.device)
+        self._resting_quats = padded_points(rests, self.device)
         bin_frame = self.mount.frames["bin"]
         self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
         self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
@@ -92,7 +97,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
             xy = np.stack([rng.uniform(*SAMPLE_X_RANGE), rng.uniform(*SAMPLE_Y_RANGE)], axis=-1)
-            quat = torch.as_tensor(self._sample_orientations(rng), dtype=torch.float32)
+            quat = self._resting_orientation(env_idx, rng)
             points = self._sample_points[env_idx]
             lowest = torch.einsum("bij,bnj->bni", quaternion_to_matrix(quat), points)[..., 2].amin(dim=1)
             position = torch.zeros((b, 3))
@@ -101,23 +106,14 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             self.sample.set_pose(Pose.create_from_pq(position, quat))
             self._sample_start_height[env_idx] = position[:, 2]
 
-    def _sample_orientations(self, rng) -> np.ndarray:
-        """wxyz quaternions: uniformly random for rocks; tubes (axis x) lie flat with random heading and roll."""
-        if self._is_tube:
-            yaw, roll = rng.uniform(-np.pi, np.pi), rng.uniform(-np.pi, np.pi)
-            half_yaw, half_roll = yaw / 2, roll / 2
-            # q = yaw about z, then roll about the tube's own x axis
-            return np.stack(
-                [
-                    np.cos(half_yaw) * np.cos(half_roll),
-                    np.cos(half_yaw) * np.sin(half_roll),
-                    np.sin(half_yaw) * np.sin(half_roll),
-                    np.sin(half_yaw) * np.cos(half_roll),
-                ],
-                axis=-1,
-            )
-        quat = rng.normal(size=(4,))
-        return quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    def _resting_orientation(self, env_idx: torch.Tensor, rng) -> torch.Tensor:
+        """A random statically stable face of each sample turned down, then a random heading (wxyz, (b, 4))."""
+        face = torch.as_tensor(rng.uniform(0.0, 1.0), dtype=torch.float32) * self._resting_counts[env_idx]
+        face = face.long().clamp(max=self._resting_counts[env_idx] - 1)
+        resting = self._resting_quats[env_idx, face]
+        heading = torch.as_tensor(rng.uniform(-np.pi, np.pi), dtype=torch.float32)
+        turn = torch.stack([torch.cos(heading / 2), torch.zeros_like(heading), torch.zeros_like(heading), torch.sin(heading / 2)], -1)
+        return quaternion_multiply(turn, resting)
 
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)

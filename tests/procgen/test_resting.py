@@ -1,0 +1,42 @@
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import Delaunay
+from scipy.spatial.transform import Rotation
+
+from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.procgen.resting import resting_orientations
+from mani_skill_space.procgen.rock import make_rock
+
+
+def _rotated(vertices, quaternion):
+    return vertices @ Rotation.from_quat(np.roll(quaternion, -1)).as_matrix().T
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_each_resting_orientation_puts_a_face_down_under_the_centre_of_mass(seed):
+    vertices = make_rock(seed).collision_vertices
+    orientations = resting_orientations(vertices)
+    assert len(orientations) >= 1
+    for quaternion in orientations:
+        turned = _rotated(vertices, quaternion)
+        bottom = turned[:, 2].min()
+        face = turned[turned[:, 2] < bottom + 1e-7]
+        assert len(face) >= 3  # a face, not an edge or a vertex, touches the ground
+        assert Delaunay(face[:, :2]).find_simplex([0.0, 0.0]) >= 0  # the centre of mass is over the face
+
+
+def test_a_cube_rests_on_its_six_faces_and_a_tube_lies_on_its_sides():
+    cube = trimesh.creation.box(extents=[0.05, 0.05, 0.05]).vertices
+    assert len(resting_orientations(cube)) == 6
+    tube = load_dataset_object("sample_tube")
+    lying = resting_orientations(tube.collision_vertices, exclude_axis=np.array([1.0, 0.0, 0.0]))
+    assert len(lying) == 24  # the prism's side faces, never its end caps
+    for quaternion in lying:
+        axis = _rotated(np.array([[1.0, 0.0, 0.0]]), quaternion)[0]
+        assert abs(axis[2]) < 1e-6
+
+
+def test_a_body_whose_centre_of_mass_is_outside_has_no_stable_face():
+    with pytest.raises(ValueError, match="no statically stable face"):
+        resting_orientations(trimesh.creation.box(extents=[0.05, 0.05, 0.05]).vertices, centre_of_mass=(0.0, 1.0, 1.0))
