@@ -1,0 +1,169 @@
+"""Motion-planning oracles as step-by-step policies, on ManiSkill's mplib-based Panda planner.
+
+An oracle's ``plan(env)`` is a generator: it plans one segment at a time with
+``PandaArmMotionPlanningSolver`` (in dry-run mode, so the planner never steps the env itself), yields the
+segment's ``pd_joint_pos`` actions one by one, and plans the next segment from the state the env actually
+reached. The caller owns the loop, so the same oracle serves the evaluation CLI (any number of steps, any
+wrappers) and the demo generator (``RecordEpisode``). Every planner call used here is deterministic (screw
+motions, single-start IK, time-optimal parameterisation of straight joint-space paths; no RRT), so the same
+seed gives the same demonstration.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator, Optional
+
+import numpy as np
+import sapien
+from mani_skill.examples.motionplanning.panda.motionplanner import PandaArmMotionPlanningSolver
+
+from mani_skill_space.policies import Policy
+
+GRIPPER_OPEN = 1.0
+GRIPPER_CLOSED = -1.0
+SURFACE_POINTS_PER_PART = 256
+JOINT_VELOCITY_LIMIT = 2.0
+JOINT_ACCELERATION_LIMIT = 4.0
+"""rad/s and rad/s^2 for every arm joint: about 0.9x the Panda's velocity limits (ManiSkill's solutions use 0.9
+rad/s, too slow for a 7.5 s episode that swings the arm to a bin behind it) with gentle accelerations, which
+the joint PD controller tracks closely."""
+
+
+class PlanningFailed(RuntimeError):
+    pass
+
+
+class Oracle(Policy):
+    control_mode = "pd_joint_pos"
+
+    def reset(self, env, seed: int) -> None:
+        self.env = env.unwrapped
+        self.done = False
+        self.failure: Optional[str] = None
+        self._actions = self.plan(self.env)
+
+    def act(self, obs) -> np.ndarray:
+        if not self.done:
+            try:
+                return next(self._actions)
+            except StopIteration:
+                self.done = True
+            except PlanningFailed as error:
+                self.done, self.failure = True, str(error)
+        return self.hold_action()
+
+    def plan(self, env) -> Iterator[np.ndarray]:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ building blocks
+    def make_solver(self, env) -> PandaArmMotionPlanningSolver:
+        """ManiSkill's Panda planner at the arm's mount, aware of the static mount (rover, bin, ...)."""
+        solver = PandaArmMotionPlanningSolver(
+            env,
+            debug=False,
+            vis=False,
+            base_pose=env.agent.robot.pose,
+            visualize_target_grasp_pose=False,
+            print_env_info=False,
+            joint_vel_limits=JOINT_VELOCITY_LIMIT,
+            joint_acc_limits=JOINT_ACCELERATION_LIMIT,
+        )
+        points = _surface_points(env.mount, np.random.default_rng(0))
+        solver.add_collision_pts(points)
+        solver.use_point_cloud = True
+        self.solver = solver
+        self.gripper = GRIPPER_OPEN
+        return solver
+
+    def arm_qpos(self) -> np.ndarray:
+        return self.env.agent.robot.get_qpos()[0, : len(self.solver.planner.joint_vel_limits)].cpu().numpy()
+
+    def hold_action(self) -> np.ndarray:
+        qpos = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+        gripper = getattr(self, "gripper", GRIPPER_OPEN)
+        return np.hstack([qpos[: len(qpos) - 2], gripper]).astype(np.float32)
+
+    def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0) -> Iterator[np.ndarray]:
+        """Screw motion of the TCP to ``pose``; ``settle_steps`` more steps hold the goal so the arm catches up."""
+        result = self.solver.move_to_pose_with_screw(pose, dry_run=True)
+        if result == -1:
+            raise PlanningFailed(f"no screw motion to the {what} pose")
+        positions = result["position"]
+        yield from self._follow(np.concatenate([positions, np.repeat(positions[-1:], settle_steps, axis=0)]))
+
+    def joint_move(self, goal: np.ndarray, what: str) -> Iterator[np.ndarray]:
+        """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised."""
+        start = self.arm_qpos()
+        if not self.path_is_free(start, goal):
+            raise PlanningFailed(f"the joint-space move to the {what} pose collides")
+        _, positions, _, _, _ = self.solver.planner.TOPP(np.stack([start, goal]), step=self.env.control_timestep)
+        yield from self._follow(np.concatenate([positions, goal[None]]))
+
+    def ik_solutions(self, pose: sapien.Pose) -> list[np.ndarray]:
+        """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to the current pose first."""
+        planner = self.solver.planner
+        target = self.solver.base_pose.inv() * pose
+        goal = np.concatenate([target.p, target.q])
+        start = self.arm_qpos()
+        dof = len(start)
+        solutions = []
+        for seed in [start, *_ik_starts(planner, dof)]:
+            status, found = planner.IK(goal, planner.pad_qpos(seed.copy()), n_init_qpos=1)
+            if status == "Success":
+                solutions.append(found[0][:dof])
+        return sorted(solutions, key=lambda q: float(np.abs(q - start).max()))
+
+    def screw_is_feasible(self, start: np.ndarray, pose: sapien.Pose) -> bool:
+        planner = self.solver.planner
+        result = planner.plan_screw(
+            np.concatenate([pose.p, pose.q]),
+            planner.pad_qpos(start.copy()),
+            time_step=self.env.control_timestep,
+            use_point_cloud=self.solver.use_point_cloud,
+            wrt_world=True,
+        )
+        return result["status"] == "Success"
+
+    def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
+        planner = self.solver.planner
+        for t in np.linspace(0.0, 1.0, samples):
+            qpos = planner.pad_qpos(start + t * (goal - start))
+            if planner.check_for_self_collision(planner.robot, qpos) or planner.check_for_env_collision(planner.robot, qpos):
+                return False
+        return True
+
+    def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
+        self.gripper = state
+        qpos = self.arm_qpos()
+        for _ in range(steps):
+            yield np.hstack([qpos, state]).astype(np.float32)
+
+    def _follow(self, positions: np.ndarray) -> Iterator[np.ndarray]:
+        for qpos in positions:
+            yield np.hstack([qpos, self.gripper]).astype(np.float32)
+
+
+def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:
+    """Fixed pseudo-random start configurations within the joint limits (the same in every process)."""
+    limits = np.asarray(planner.joint_limits)[:dof]
+    return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(count, dof))
+
+
+def _surface_points(asset, rng: np.random.Generator) -> np.ndarray:
+    """Points on the collision parts of a static asset, as the planner's obstacle point cloud (world frame)."""
+    import trimesh
+
+    samples = [trimesh.sample.sample_surface(part.mesh, SURFACE_POINTS_PER_PART, seed=rng)[0] for part in asset.collision_parts]
+    return np.concatenate(samples)
+
+
+def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose:
+    """A vertical grasp of ``actor`` across the shortest horizontal side of its oriented bounding box."""
+    from mani_skill.examples.motionplanning.base_motionplanner.utils import compute_grasp_info_by_obb, get_actor_obb
+
+    obb = get_actor_obb(actor)
+    approaching = np.array([0.0, 0.0, -1.0])
+    target_closing = env.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].cpu().numpy()
+    info = compute_grasp_info_by_obb(obb, approaching=approaching, target_closing=target_closing, depth=finger_length)
+    centre = np.asarray(obb.primitive.transform)[:3, 3]
+    return env.agent.build_grasp_pose(approaching, info["closing"], centre)

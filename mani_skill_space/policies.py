@@ -1,0 +1,86 @@
+"""Policies the evaluation CLI and the demo generator run: an object with ``act(obs) -> action``.
+
+A policy may also define ``control_mode`` (the env is made with it; None keeps the env's default) and
+``reset(env, seed)`` (called after every ``env.reset(seed=seed)``; ``env`` is the gym env, so privileged
+policies such as the oracles can read ``env.unwrapped``).
+
+``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle`` or ``module:callable``,
+where ``callable`` is a zero-argument factory returning such an object (checkpoints come later through it).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+BUILTIN_POLICIES = ("random", "zero", "oracle")
+
+
+class Policy:
+    control_mode: Optional[str] = None
+
+    def reset(self, env, seed: int) -> None:
+        """Called after each ``env.reset(seed=seed)``."""
+
+    def act(self, obs) -> np.ndarray:
+        raise NotImplementedError
+
+
+class RandomPolicy(Policy):
+    """Uniform actions from the env's action space, seeded per episode (same seed, same actions)."""
+
+    def reset(self, env, seed: int) -> None:
+        self.space = env.action_space
+        self.space.seed(seed)
+
+    def act(self, obs) -> np.ndarray:
+        return self.space.sample()
+
+
+class ZeroPolicy(Policy):
+    """All-zero actions (with ``pd_ee_delta_pose``: hold the pose, gripper half open)."""
+
+    def reset(self, env, seed: int) -> None:
+        self.action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+
+    def act(self, obs) -> np.ndarray:
+        return self.action
+
+
+class OraclePolicy(Policy):
+    """Dispatches to the motion-planning oracle of whichever env it is reset on."""
+
+    control_mode = "pd_joint_pos"
+
+    def reset(self, env, seed: int) -> None:
+        from mani_skill_space.oracles import oracle_for
+
+        self.oracle = oracle_for(env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__)
+        self.oracle.reset(env, seed)
+
+    def act(self, obs) -> np.ndarray:
+        return self.oracle.act(obs)
+
+    @property
+    def done(self) -> bool:
+        return self.oracle.done
+
+    @property
+    def failure(self) -> Optional[str]:
+        return self.oracle.failure
+
+
+def load_policy(spec: str) -> Policy:
+    builtins: dict[str, Callable[[], Any]] = {"random": RandomPolicy, "zero": ZeroPolicy, "oracle": OraclePolicy}
+    if spec in builtins:
+        return builtins[spec]()
+    if ":" not in spec:
+        raise ValueError(f"Unknown policy {spec!r}; valid choices: {', '.join(BUILTIN_POLICIES)} or module:callable")
+    module_name, _, attribute = spec.partition(":")
+    factory = getattr(importlib.import_module(module_name), attribute)
+    policy = factory()
+    if not callable(getattr(policy, "act", None)):
+        raise TypeError(f"{spec}() returned {policy!r}, which has no act(obs) method")
+    return policy
