@@ -20,22 +20,24 @@ def resting_orientations(
 ) -> np.ndarray:
     """wxyz quaternions, one per stable hull face, that turn the body so that face points straight down.
 
-    ``margin`` is the least distance (m) between the centre of mass's projection and the face's edges.
-    Faces whose normal is within 10 degrees of ``exclude_axis`` (either way) are skipped, e.g. to keep a tube
-    from standing on its end.
+    A face is stable when the centre of mass projects inside it at least ``margin`` (m) from its edges; if no
+    face is that stable, the single most stable one is returned. Faces whose normal is within 10 degrees of
+    ``exclude_axis`` (either way) are skipped, e.g. to keep a tube from standing on its end.
     """
     hull = ConvexHull(np.asarray(vertices, dtype=np.float64))
     com = np.asarray(centre_of_mass, dtype=np.float64)
-    rotations = []
+    normals, margins = [], []
     for normal, face_points in _faces(hull):
         if exclude_axis is not None and abs(normal @ exclude_axis) > np.cos(np.radians(10)):
             continue
         projection = com - ((com - face_points[0]) @ normal) * normal
-        if _inside_convex_polygon(projection, face_points, normal, margin):
-            rotations.append(_quaternion_between(normal, DOWN))
-    if not rotations:
+        normals.append(normal)
+        margins.append(_distance_inside_polygon(projection, face_points, normal))
+    margins = np.asarray(margins)
+    if not len(margins) or margins.max() <= 0:
         raise ValueError("the body has no statically stable face (is the centre of mass inside it?)")
-    return np.stack(rotations)
+    chosen = np.flatnonzero(margins >= margin) if margins.max() >= margin else [int(np.argmax(margins))]
+    return np.stack([_quaternion_between(normals[i], DOWN) for i in chosen])
 
 
 def _faces(hull: ConvexHull):
@@ -48,7 +50,8 @@ def _faces(hull: ConvexHull):
         yield normal / np.linalg.norm(normal), hull.points[np.unique(simplices)]
 
 
-def _inside_convex_polygon(point: np.ndarray, polygon: np.ndarray, normal: np.ndarray, margin: float) -> bool:
+def _distance_inside_polygon(point: np.ndarray, polygon: np.ndarray, normal: np.ndarray) -> float:
+    """Least distance from ``point`` to the edges of a planar convex polygon; negative when outside."""
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
@@ -57,7 +60,7 @@ def _inside_convex_polygon(point: np.ndarray, polygon: np.ndarray, normal: np.nd
     edges = np.roll(outline, -1, axis=0) - outline
     # signed distance of the origin to each edge's line, positive inside a counter-clockwise polygon
     distances = (edges[:, 0] * -outline[:, 1] - edges[:, 1] * -outline[:, 0]) / np.linalg.norm(edges, axis=1)
-    return bool(np.all(distances >= margin))
+    return float(distances.min())
 
 
 def _quaternion_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

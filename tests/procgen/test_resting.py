@@ -40,3 +40,10 @@ def test_a_cube_rests_on_its_six_faces_and_a_tube_lies_on_its_sides():
 def test_a_body_whose_centre_of_mass_is_outside_has_no_stable_face():
     with pytest.raises(ValueError, match="no statically stable face"):
         resting_orientations(trimesh.creation.box(extents=[0.05, 0.05, 0.05]).vertices, centre_of_mass=(0.0, 1.0, 1.0))
+
+
+def test_without_a_face_that_stable_the_most_stable_face_is_used():
+    cube = trimesh.creation.box(extents=[0.05, 0.05, 0.05]).vertices
+    near_a_corner = (0.024, 0.024, 0.024)  # every face's margin is 1 mm, below the 2 mm asked for
+    assert len(resting_orientations(cube, centre_of_mass=near_a_corner)) == 1
+    assert len(resting_orientations(cube, centre_of_mass=near_a_corner, margin=0.0005)) == 6
