@@ -132,6 +132,16 @@ class Oracle(Policy):
                 return False
         return True
 
+    def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
+        """Hold still until the task has reported success for ``stable_steps`` steps in a row (e.g. a released
+        object has come to rest), at most ``most_steps`` steps."""
+        streak = 0
+        for _ in range(most_steps):
+            streak = streak + 1 if bool(self.env.evaluate()["success"][0]) else 0
+            if streak >= stable_steps:
+                return
+            yield self.hold_action()
+
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
         self.gripper = state
         qpos = self.arm_qpos()

@@ -17,6 +17,8 @@ LIFT_HEIGHT = 0.3
 CARRY_HEIGHT = 0.5
 """TCP height over the bin before lowering the sample in (the rim is at 0.33 m)."""
 RELEASE_HEIGHT_ABOVE_FLOOR = 0.06
+SETTLE_IN_BIN_STEPS = 25
+"""At most this many steps of waiting, after the retreat, for the released sample to come to rest."""
 DROP_OFFSET = (0.0, 0.06)
 """Where over the bin floor the sample is released, relative to its centre (y toward the sample's side)."""
 
@@ -36,6 +38,7 @@ class SampleCollectionOracle(Oracle):
         yield from self.screw_to(release, "release")
         yield from self.set_gripper(GRIPPER_OPEN)
         yield from self.screw_to(over_bin, "retreat")
+        yield from self.wait_for_success(SETTLE_IN_BIN_STEPS)
 
     def _bin_approach(self, env, side: float) -> tuple[sapien.Pose, sapien.Pose, np.ndarray]:
         """A pose over the bin, the release pose below it and an arm configuration reaching the first, such that

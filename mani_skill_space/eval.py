@@ -1,0 +1,190 @@
+"""Evaluate policies on a benchmark suite.
+
+    python -m mani_skill_space.eval --suite tasks/smoke.toml --policy oracle random
+
+Every configuration of the suite runs its episodes (one seed each, seeds from the suite) in worker processes
+and reports success_once and success_at_end with 95% Wilson intervals, the mean return (in the env's reward
+mode, ``normalized_dense`` unless the suite says otherwise) and the mean episode length (steps until the first
+success, or the whole episode). Results go to ``results.json`` and ``results.md`` in the output folder; the
+table is also printed. The same suite and policies give the same numbers.
+
+Policies: ``random``, ``zero``, ``oracle`` (the motion-planning solution of each task) or ``module:callable``
+(see ``mani_skill_space.policies``). A policy with a ``control_mode`` gets its env made in that mode.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Optional
+
+import gymnasium as gym
+import imageio.v2 as imageio
+import numpy as np
+import tyro
+from tqdm import tqdm
+
+from mani_skill_space.metrics import EpisodeResult, summarize
+from mani_skill_space.policies import load_policy
+from mani_skill_space.rollout import run_episode
+from mani_skill_space.suites import Configuration, Suite, load_suite
+
+STATE_OBS_MODES = ("state", "state_dict", "none")
+
+
+@dataclass
+class Args:
+    suite: Path
+    """A suite file, e.g. tasks/smoke.toml."""
+    policy: tuple[str, ...] = ("oracle",)
+    """One or more policies: random, zero, oracle or module:callable."""
+    output_dir: Path = Path("outputs/eval")
+    num_workers: int = os.cpu_count() or 1
+    video: int = 0
+    """Save videos of the first N episodes of every configuration and policy."""
+    episodes: Optional[int] = None
+    """Run only the first N seeds of every configuration (a quick look; the suite's counts otherwise)."""
+
+
+@dataclass(frozen=True)
+class Chunk:
+    configuration: Configuration
+    policy: str
+    seeds: tuple[int, ...]
+    video_dir: Optional[str] = None
+
+
+def env_kwargs(configuration: Configuration, control_mode: Optional[str], render: bool) -> dict:
+    kwargs = dict(configuration.kwargs)
+    if control_mode is not None:
+        kwargs["control_mode"] = control_mode
+    if render:
+        kwargs["render_mode"] = "rgb_array"
+    elif kwargs.get("obs_mode", "state") in STATE_OBS_MODES:
+        kwargs.setdefault("render_backend", "none")
+    return kwargs
+
+
+_ENVS: dict[str, gym.Env] = {}
+
+
+def _cached_env(env_id: str, kwargs: dict) -> gym.Env:
+    """Workers keep their last env: consecutive chunks of a configuration reuse it (every episode rebuilds the
+    scene from its seed anyway)."""
+    key = json.dumps([env_id, kwargs], sort_keys=True)
+    if key not in _ENVS:
+        for env in _ENVS.values():
+            env.close()
+        _ENVS.clear()
+        _ENVS[key] = gym.make(env_id, **kwargs)
+    return _ENVS[key]
+
+
+def run_chunk(chunk: Chunk) -> list[EpisodeResult]:
+    import mani_skill_space  # noqa: F401  (registers the envs in a spawned worker)
+
+    policy = load_policy(chunk.policy)
+    env = _cached_env(chunk.configuration.env_id, env_kwargs(chunk.configuration, getattr(policy, "control_mode", None), chunk.video_dir is not None))
+    results = []
+    for seed in chunk.seeds:
+        frames: list[np.ndarray] = []
+        record = (lambda: frames.append(env.render()[0].cpu().numpy())) if chunk.video_dir else None
+        results.append(run_episode(env, policy, seed, on_step=record))
+        if chunk.video_dir:
+            Path(chunk.video_dir).mkdir(parents=True, exist_ok=True)
+            imageio.mimsave(Path(chunk.video_dir) / f"{chunk.policy.replace(':', '_')}_seed{seed}.mp4", frames, fps=20)
+    return results
+
+
+def plan_chunks(suite: Suite, policies: tuple[str, ...], args: Args) -> list[Chunk]:
+    chunks = []
+    for configuration in suite.configurations:
+        if not configuration.available:
+            continue
+        seeds = configuration.seeds[: args.episodes] if args.episodes else configuration.seeds
+        for policy in policies:
+            video_dir = str(args.output_dir / "videos" / _slug(configuration.name)) if args.video else None
+            recorded, rest = seeds[: args.video], seeds[args.video :]
+            if recorded:
+                chunks.append(Chunk(configuration, policy, tuple(recorded), video_dir))
+            size = max(1, math.ceil(len(rest) / (2 * max(1, args.num_workers))))
+            chunks += [Chunk(configuration, policy, tuple(rest[i : i + size])) for i in range(0, len(rest), size)]
+    return chunks
+
+
+def evaluate(suite: Suite, args: Args) -> dict:
+    for policy in args.policy:
+        load_policy(policy)  # fail early on a bad policy spec
+    chunks = plan_chunks(suite, args.policy, args)
+    results: dict[tuple[str, str], list[EpisodeResult]] = {}
+    with ProcessPoolExecutor(max_workers=args.num_workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(run_chunk, chunk): chunk for chunk in chunks}
+        with tqdm(total=sum(len(c.seeds) for c in chunks), desc=f"eval {suite.name}", unit="episode") as progress:
+            for future in as_completed(futures):
+                chunk = futures[future]
+                results.setdefault((chunk.configuration.name, chunk.policy), []).extend(future.result())
+                progress.update(len(chunk.seeds))
+    return _report(suite, args.policy, results)
+
+
+def _report(suite: Suite, policies: tuple[str, ...], results: dict) -> dict:
+    rows = []
+    for configuration in suite.configurations:
+        for policy in policies:
+            row = {"configuration": configuration.name, "env_id": configuration.env_id, "kwargs": configuration.kwargs, "policy": policy}
+            if not configuration.available:
+                row["status"] = "not available: task not implemented yet"
+            else:
+                episodes = sorted(results[(configuration.name, policy)], key=lambda r: r.seed)
+                row.update(status="ok", summary=summarize(episodes), episodes=[e.to_dict() for e in episodes])
+            rows.append(row)
+    return {"suite": suite.name, "suite_file": str(suite.path), "policies": list(policies), "rows": rows}
+
+
+def markdown_table(report: dict) -> str:
+    lines = [
+        f"Suite `{report['suite']}`: success rates with 95% Wilson intervals.",
+        "",
+        "| configuration | policy | episodes | success_once | success_at_end | return | episode_len |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in report["rows"]:
+        if row["status"] != "ok":
+            lines.append(f"| {row['configuration']} | {row['policy']} | - | {row['status']} | | | |")
+            continue
+        s = row["summary"]
+        lines.append(
+            f"| {row['configuration']} | {row['policy']} | {s['episodes']} | {_rate(s['success_once'], s['success_once_ci95'])} "
+            f"| {_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {s['episode_len_mean']:.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def _rate(rate: float, interval) -> str:
+    return f"{100 * rate:.1f}% [{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
+def main(args: Args) -> dict:
+    suite = load_suite(args.suite)
+    report = evaluate(suite, args)
+    output = args.output_dir
+    output.mkdir(parents=True, exist_ok=True)
+    (output / "results.json").write_text(json.dumps(report, indent=1) + "\n")
+    table = markdown_table(report)
+    (output / "results.md").write_text(table + "\n")
+    print(table)
+    print(f"\nresults: {output / 'results.json'} and {output / 'results.md'}")
+    return report
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,49 @@
+"""Episode outcomes and their summary statistics (sim-free)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    seed: int
+    success_once: bool
+    success_at_end: bool
+    episode_return: float
+    episode_len: int
+    """Steps until the first success, or all the steps the episode ran when it never succeeded."""
+    failure: str = ""
+    """Why a scripted policy gave up (e.g. a planning failure); empty otherwise."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def wilson_interval(successes: int, trials: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion (95% by default)."""
+    if trials <= 0:
+        raise ValueError("the interval needs at least one trial")
+    if not 0 <= successes <= trials:
+        raise ValueError(f"successes ({successes}) must lie between 0 and trials ({trials})")
+    p = successes / trials
+    denominator = 1 + z * z / trials
+    centre = (p + z * z / (2 * trials)) / denominator
+    half_width = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / denominator
+    return max(0.0, centre - half_width), min(1.0, centre + half_width)
+
+
+def summarize(results: list[EpisodeResult]) -> dict:
+    n = len(results)
+    once = sum(r.success_once for r in results)
+    at_end = sum(r.success_at_end for r in results)
+    return {
+        "episodes": n,
+        "success_once": once / n,
+        "success_once_ci95": wilson_interval(once, n),
+        "success_at_end": at_end / n,
+        "success_at_end_ci95": wilson_interval(at_end, n),
+        "return_mean": sum(r.episode_return for r in results) / n,
+        "episode_len_mean": sum(r.episode_len for r in results) / n,
+    }
