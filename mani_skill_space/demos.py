@@ -1,0 +1,146 @@
+"""Generate motion-planning demonstrations with the tasks' oracles, recorded in ManiSkill's trajectory format.
+
+    python -m mani_skill_space.demos -e SampleCollection-v1 -n 100 --env-kwargs '{"domain": "mars"}'
+
+The flags mirror ManiSkill's ``mani_skill.examples.motionplanning.panda.run``, plus ``--env-kwargs`` (a JSON
+object: domain, asset_source, ...) and ``--seed-start``. Output: ``<record-dir>/<env-id>/motionplanning/
+<traj-name>.h5`` and ``.json``, written by ManiSkill's ``RecordEpisode`` (actions in ``pd_joint_pos``, env states,
+per-step success; the JSON carries the env kwargs and each episode's seed). Convert them to another control
+mode or observation mode with ``python -m mani_skill_space.replay`` (ManiSkill's replay tool with our envs
+registered), e.g. ``-c pd_ee_delta_pose -o state --save-traj``.
+
+With several processes, process i takes seeds seed_start + i, seed_start + i + procs, ... (disjoint), and
+the per-process files are merged with ManiSkill's ``merge_trajectories``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, replace
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Annotated, Optional
+
+import gymnasium as gym
+import tyro
+from mani_skill.trajectory.merge_trajectory import merge_trajectories
+from mani_skill.utils.wrappers.record import RecordEpisode
+from tqdm import tqdm
+
+from mani_skill_space.oracles import ORACLES, oracle_for
+from mani_skill_space.rollout import run_episode
+
+
+@dataclass
+class Args:
+    env_id: Annotated[str, tyro.conf.arg(aliases=["-e"])] = "SampleCollection-v1"
+    """Env to solve; oracles exist for the ids in ``mani_skill_space.oracles.ORACLES``."""
+    obs_mode: Annotated[str, tyro.conf.arg(aliases=["-o"])] = "none"
+    """Observations to store; usually none (replay the demos later to get any observation mode)."""
+    num_traj: Annotated[int, tyro.conf.arg(aliases=["-n"])] = 10
+    only_count_success: bool = False
+    """Keep going until num_traj demos succeed; save only the successful ones."""
+    reward_mode: Optional[str] = None
+    sim_backend: Annotated[str, tyro.conf.arg(aliases=["-b"])] = "auto"
+    render_mode: str = "rgb_array"
+    vis: bool = False
+    """Show the solution live in SAPIEN's viewer (needs a display)."""
+    save_video: bool = False
+    traj_name: Optional[str] = None
+    """Name of the .h5/.json files (default: a timestamp)."""
+    shader: str = "default"
+    record_dir: str = "demos"
+    num_procs: Annotated[int, tyro.conf.arg(aliases=["-j"])] = os.cpu_count() or 1
+    env_kwargs: str = "{}"
+    """JSON object of env kwargs, e.g. '{"domain": "moon", "asset_source": "dataset"}'."""
+    seed_start: int = 0
+
+
+@dataclass(frozen=True)
+class Outcome:
+    path: str
+    attempts: int
+    successes: int
+    saved: int
+
+
+def generate(args: Args, proc_id: int = 0) -> Outcome:
+    import mani_skill_space  # noqa: F401  (registers the envs in a spawned worker)
+
+    oracle = oracle_for(args.env_id)
+    kwargs = json.loads(args.env_kwargs)
+    env = gym.make(
+        args.env_id,
+        obs_mode=args.obs_mode,
+        control_mode=oracle.control_mode,
+        render_mode=args.render_mode,
+        reward_mode=args.reward_mode,
+        sim_backend=args.sim_backend,
+        sensor_configs=dict(shader_pack=args.shader),
+        human_render_camera_configs=dict(shader_pack=args.shader),
+        viewer_camera_configs=dict(shader_pack=args.shader),
+        **kwargs,
+    )
+    name = args.traj_name if args.num_procs == 1 else f"{args.traj_name}.{proc_id}"
+    env = RecordEpisode(
+        env,
+        output_dir=str(Path(args.record_dir) / args.env_id / "motionplanning"),
+        trajectory_name=name,
+        save_video=args.save_video,
+        source_type="motionplanning",
+        source_desc="mani-skill-space motion-planning oracle (mani_skill_space.oracles)",
+        video_fps=int(env.unwrapped.control_freq),
+        record_reward=False,
+        save_on_reset=False,
+    )
+    path = env._h5_file.filename
+    render = env.unwrapped.render_human if args.vis else None
+    seed, attempts, successes, saved = args.seed_start + proc_id, 0, 0, 0
+    with tqdm(total=args.num_traj, desc=f"proc {proc_id}", position=proc_id) as progress:
+        while saved < args.num_traj:
+            result = run_episode(env, oracle, seed, stop_when_done=True, on_step=render)
+            attempts += 1
+            successes += result.success_at_end
+            keep = result.success_at_end or not args.only_count_success
+            env.flush_trajectory(save=keep)
+            if args.save_video:
+                env.flush_video(save=keep)
+            saved += keep
+            progress.update(keep)
+            progress.set_postfix(success_rate=f"{successes / attempts:.2f}")
+            seed += args.num_procs
+    env.close()
+    return Outcome(path, attempts, successes, saved)
+
+
+def main(args: Args) -> Outcome:
+    if args.env_id not in ORACLES:
+        raise ValueError(f"No oracle for {args.env_id!r}; oracles exist for: {', '.join(ORACLES)}")
+    json.loads(args.env_kwargs)  # fail early on malformed JSON
+    start = time.perf_counter()
+    args = replace(args, traj_name=args.traj_name or time.strftime("%Y%m%d_%H%M%S"))
+    procs = max(1, min(args.num_procs, args.num_traj))
+    if procs == 1:
+        outcome = generate(replace(args, num_procs=1))
+    else:
+        shares = [args.num_traj // procs + (i < args.num_traj % procs) for i in range(procs)]
+        with get_context("spawn").Pool(procs) as pool:
+            parts = pool.starmap(generate, [(replace(args, num_traj=n, num_procs=procs), i) for i, n in enumerate(shares)])
+        merged = parts[0].path[: -len(".0.h5")] + ".h5"
+        merge_trajectories(merged, [p.path for p in parts])
+        for part in parts:
+            os.remove(part.path)
+            os.remove(part.path.replace(".h5", ".json"))
+        outcome = Outcome(merged, sum(p.attempts for p in parts), sum(p.successes for p in parts), sum(p.saved for p in parts))
+    minutes = (time.perf_counter() - start) / 60
+    print(
+        f"{outcome.saved} trajectories saved to {outcome.path} ({outcome.successes}/{outcome.attempts} successful, "
+        f"{outcome.saved / minutes:.1f} trajectories per minute with {procs} process(es))"
+    )
+    return outcome
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
