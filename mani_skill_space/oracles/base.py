@@ -38,6 +38,7 @@ class Oracle(Policy):
 
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
+        self.gripper = GRIPPER_OPEN
         self.done = False
         self.failure: Optional[str] = None
         self._actions = self.plan(self.env)
@@ -72,32 +73,39 @@ class Oracle(Policy):
         solver.add_collision_pts(points)
         solver.use_point_cloud = True
         self.solver = solver
-        self.gripper = GRIPPER_OPEN
         return solver
 
     def arm_qpos(self) -> np.ndarray:
-        return self.env.agent.robot.get_qpos()[0, : len(self.solver.planner.joint_vel_limits)].cpu().numpy()
+        return self.env.agent.controller.controllers["arm"].qpos[0].cpu().numpy()
 
     def hold_action(self) -> np.ndarray:
-        qpos = self.env.agent.robot.get_qpos()[0].cpu().numpy()
-        gripper = getattr(self, "gripper", GRIPPER_OPEN)
-        return np.hstack([qpos[: len(qpos) - 2], gripper]).astype(np.float32)
+        return np.hstack([self.arm_qpos(), self.gripper]).astype(np.float32)
 
     def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0) -> Iterator[np.ndarray]:
-        """Screw motion of the TCP to ``pose``; ``settle_steps`` more steps hold the goal so the arm catches up."""
-        result = self.solver.move_to_pose_with_screw(pose, dry_run=True)
-        if result == -1:
-            raise PlanningFailed(f"no screw motion to the {what} pose")
-        positions = result["position"]
+        """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
+        collision-free IK solution); ``settle_steps`` more steps hold the goal so the arm catches up."""
+        positions = self._screw_path(self.arm_qpos(), pose)
+        if positions is None:
+            positions = self._joint_path(pose, what)
         yield from self._follow(np.concatenate([positions, np.repeat(positions[-1:], settle_steps, axis=0)]))
+
+    def _joint_path(self, pose: sapien.Pose, what: str) -> np.ndarray:
+        start = self.arm_qpos()
+        for goal in self.ik_solutions(pose):
+            if self.path_is_free(start, goal):
+                return self._timed_path(start, goal)
+        raise PlanningFailed(f"no motion to the {what} pose")
 
     def joint_move(self, goal: np.ndarray, what: str) -> Iterator[np.ndarray]:
         """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised."""
         start = self.arm_qpos()
         if not self.path_is_free(start, goal):
             raise PlanningFailed(f"the joint-space move to the {what} pose collides")
+        yield from self._follow(self._timed_path(start, goal))
+
+    def _timed_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         _, positions, _, _, _ = self.solver.planner.TOPP(np.stack([start, goal]), step=self.env.control_timestep)
-        yield from self._follow(np.concatenate([positions, goal[None]]))
+        return np.concatenate([positions, goal[None]])
 
     def ik_solutions(self, pose: sapien.Pose) -> list[np.ndarray]:
         """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to the current pose first."""
@@ -114,15 +122,18 @@ class Oracle(Policy):
         return sorted(solutions, key=lambda q: float(np.abs(q - start).max()))
 
     def screw_is_feasible(self, start: np.ndarray, pose: sapien.Pose) -> bool:
+        return self._screw_path(start, pose) is not None
+
+    def _screw_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """Joint positions of a collision-free screw motion of the TCP from ``start`` to ``pose``, if any."""
         planner = self.solver.planner
         result = planner.plan_screw(
             np.concatenate([pose.p, pose.q]),
             planner.pad_qpos(start.copy()),
             time_step=self.env.control_timestep,
             use_point_cloud=self.solver.use_point_cloud,
-            wrt_world=True,
         )
-        return result["status"] == "Success"
+        return result["position"] if result["status"] == "Success" else None
 
     def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
         planner = self.solver.planner
@@ -144,9 +155,7 @@ class Oracle(Policy):
 
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
         self.gripper = state
-        qpos = self.arm_qpos()
-        for _ in range(steps):
-            yield np.hstack([qpos, state]).astype(np.float32)
+        yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0))
 
     def _follow(self, positions: np.ndarray) -> Iterator[np.ndarray]:
         for qpos in positions:
