@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 SKY_KINDS = ("stars", "mars_day", "earth_day", "orbit_earth_limb")
 GROUND_KINDS = ("lunar_regolith", "martian_regolith", "asteroid_rubble", "earth_soil")
@@ -27,7 +28,8 @@ GROUND_KINDS = ("lunar_regolith", "martian_regolith", "asteroid_rubble", "earth_
 NOISE_VOLUME_SIZE = 64
 """Edge of the periodic 3-D noise volume sampled by the skies (voxels)."""
 SPHERE_NOISE_RADIUS = 28.0
-"""Radius (voxels) of the unit sphere inside the noise volume: under half the period, so nothing repeats."""
+"""Largest radius (voxels) of the sphere of directions inside the noise volume: under half the period, so no
+feature repeats across the sky."""
 HORIZON_BLEND_ROWS = 4.0
 EARTH_RADIUS_KM = 6371.0
 ORBIT_ALTITUDE_KM = 400.0
@@ -59,12 +61,11 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 
 def _spectral_noise(rng: np.random.Generator, shape: tuple[int, ...], slope: float,
-                    max_cycles: float | None = None, stretch: tuple[float, ...] | None = None) -> np.ndarray:
+                    stretch: tuple[float, ...] | None = None) -> np.ndarray:
     """Zero-mean, unit-std noise that is periodic along every axis (FFT-filtered white noise).
 
-    The amplitude falls off as ``frequency ** -slope`` (larger = smoother); ``max_cycles`` softly removes
-    detail finer than that many cycles per period; ``stretch`` scales each axis' frequency before the
-    fall-off, making features elongated along the axes with a large factor's opposite (anisotropic grain).
+    The amplitude falls off as ``frequency ** -slope`` (larger = smoother). ``stretch`` scales each axis'
+    frequencies before the fall-off: a factor below 1 keeps finer detail along that axis (streaks across it).
     """
     white = rng.standard_normal(shape, dtype=np.float32)
     axes_freqs = [np.fft.fftfreq(n, 1.0 / n) for n in shape[:-1]] + [np.fft.rfftfreq(shape[-1], 1.0 / shape[-1])]
@@ -74,8 +75,6 @@ def _spectral_noise(rng: np.random.Generator, shape: tuple[int, ...], slope: flo
     cycles.flat[0] = 1.0
     amplitude = cycles ** -slope
     amplitude.flat[0] = 0.0
-    if max_cycles is not None:
-        amplitude *= np.exp(-((cycles / max_cycles) ** 2))
     field = np.fft.irfftn(np.fft.rfftn(white) * amplitude, s=shape).astype(np.float32)
     field -= field.mean()
     return field / max(float(field.std()), 1e-12)
@@ -92,19 +91,12 @@ def _sample_periodic_volume(volume: np.ndarray, points: np.ndarray) -> np.ndarra
 # Sky helpers
 
 
-def _sky_angles(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Polar angle per row (height, 1) and azimuth per column (1, width) of the pixel centres."""
-    polar = (np.arange(height, dtype=np.float32) + 0.5) * (np.pi / height)
-    azimuth = (np.arange(width, dtype=np.float32) + 0.5) * (2.0 * np.pi / width)
-    return polar[:, None], azimuth[None, :]
-
-
 def _sky_directions(width: int, height: int) -> np.ndarray:
-    """Unit view direction (height, width, 3) of every pixel, z up."""
-    polar, azimuth = _sky_angles(width, height)
-    sin_polar = np.sin(polar)
-    return np.stack(np.broadcast_arrays(sin_polar * np.cos(azimuth), sin_polar * np.sin(azimuth),
-                                        np.cos(polar) + 0.0 * azimuth), axis=-1).astype(np.float32)
+    """Unit view direction (height, width, 3) of every pixel centre, z up."""
+    polar = ((np.arange(height, dtype=np.float32) + 0.5) * (np.pi / height))[:, None]
+    azimuth = ((np.arange(width, dtype=np.float32) + 0.5) * (2.0 * np.pi / width))[None, :]
+    x, y, z = np.broadcast_arrays(np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar))
+    return np.stack([x, y, z], axis=-1)
 
 
 def _sphere_noise(rng: np.random.Generator, directions: np.ndarray, slope: float,
@@ -186,8 +178,9 @@ def _starry_space(rng: np.random.Generator, width: int, height: int, directions:
 
     field_stars = _random_directions(rng, _star_count(width, height, 4000))
     candidates = _random_directions(rng, _star_count(width, height, 6000))
-    near_band = np.abs(candidates @ band_normal) < band_width * np.sqrt(-2.0 * np.log(rng.uniform(size=len(candidates))))
-    band_stars = candidates[near_band]
+    # Keep each candidate with probability equal to the band profile at its direction.
+    accept_distance = band_width * np.sqrt(-2.0 * np.log(rng.uniform(size=len(candidates))))
+    band_stars = candidates[np.abs(candidates @ band_normal) < accept_distance]
     band_colours = _random_star_colours(rng, len(band_stars)) * 0.6
     _draw_stars(image, np.concatenate([field_stars, band_stars]),
                 np.concatenate([_random_star_colours(rng, len(field_stars)), band_colours]))
@@ -210,7 +203,7 @@ def _mars_day_sky(rng: np.random.Generator, width: int, height: int) -> np.ndarr
     directions = _sky_directions(width, height)
     elevation = np.arcsin(np.clip(directions[..., 2], -1.0, 1.0))
     height_above = np.clip(np.sin(elevation), 0.0, 1.0)
-    horizon_colour, zenith_colour = _rgb(226.0, 176.0, 124.0), _rgb(160.0, 106.0, 70.0)
+    horizon_colour, zenith_colour = _rgb(234.0, 188.0, 136.0), _rgb(178.0, 122.0, 80.0)
     sky = _mix(horizon_colour, zenith_colour, height_above ** 0.55)
     haze = _sphere_noise(rng, directions, slope=1.6, radius=10.0)
     sky *= (1.0 + 0.045 * haze)[..., None]
@@ -231,10 +224,10 @@ def _earth_day_sky(rng: np.random.Generator, width: int, height: int) -> np.ndar
     sky = _mix(horizon_colour, zenith_colour, height_above ** 0.45)
 
     cloud_band = _smoothstep(4.0, 18.0, elevation) * (1.0 - _smoothstep(50.0, 78.0, elevation))
-    cloud_noise = _sphere_noise(rng, directions, slope=1.35, radius=SPHERE_NOISE_RADIUS)
-    cover = _smoothstep(0.55, 1.5, cloud_noise + 0.5 * cloud_band - 0.6) * cloud_band
-    underside = _smoothstep(0.6, 2.2, cloud_noise)
-    cloud_colour = _mix(_rgb(250.0, 250.0, 252.0), _rgb(196.0, 200.0, 210.0), underside)
+    cloud_noise = _sphere_noise(rng, directions, slope=1.45, radius=20.0)
+    cover = _smoothstep(0.3, 1.1, cloud_noise + 0.6 * cloud_band - 0.6) * cloud_band
+    shadow = _smoothstep(-1.0, 1.5, _sphere_noise(rng, directions, slope=1.2, radius=12.0))
+    cloud_colour = _mix(_rgb(250.0, 250.0, 252.0), _rgb(200.0, 204.0, 214.0), shadow)
     sky = _mix(sky, cloud_colour, 0.95 * cover)
 
     soil_tone = _sphere_noise(rng, directions, slope=1.2)
@@ -248,22 +241,23 @@ def _earth_surface_colour(rng: np.random.Generator, surface_km: np.ndarray, nadi
     """Day-side albedo colour (N, 3) of Earth surface points given in km from Earth's centre (N, 3)."""
     land_volume = _spectral_noise(rng, (NOISE_VOLUME_SIZE,) * 3, slope=1.5)
     cloud_volume = _spectral_noise(rng, (NOISE_VOLUME_SIZE,) * 3, slope=1.25)
-    offsets = rng.uniform(0.0, NOISE_VOLUME_SIZE, (4, 3)).astype(np.float32)
+    offsets = rng.uniform(0.0, NOISE_VOLUME_SIZE, (5, 3)).astype(np.float32)
 
     def sample(volume: np.ndarray, km_per_voxel: float, offset: np.ndarray) -> np.ndarray:
         return _sample_periodic_volume(volume, surface_km / km_per_voxel + offset)
 
     # The station is kept over ocean (as for most of an orbit) so the view straight down is mostly sea.
     nadir_distance = np.linalg.norm(surface_km - nadir_point, axis=-1)
-    land_height = sample(land_volume, 90.0, offsets[0]) - 1.6 * np.exp(-((nadir_distance / 900.0) ** 2))
-    land = _smoothstep(0.45, 0.6, land_height)
+    land_height = sample(land_volume, 80.0, offsets[0]) - 2.2 * np.exp(-((nadir_distance / 500.0) ** 2))
+    land = _smoothstep(0.12, 0.24, land_height)
     vegetation = _smoothstep(-0.4, 0.6, sample(land_volume, 35.0, offsets[1]))
-    land_colour = _mix(_rgb(150.0, 128.0, 88.0), _rgb(70.0, 98.0, 52.0), vegetation)
-    ocean_colour = _mix(_rgb(12.0, 42.0, 105.0), _rgb(22.0, 70.0, 135.0), _smoothstep(0.0, 0.45, land_height))
+    land_colour = _mix(_rgb(165.0, 135.0, 90.0), _rgb(62.0, 92.0, 45.0), vegetation)
+    ocean_colour = _mix(_rgb(8.0, 30.0, 85.0), _rgb(20.0, 75.0, 130.0), _smoothstep(0.0, 0.3, land_height))
     colour = _mix(ocean_colour, land_colour, land)
 
-    cloud_density = sample(cloud_volume, 110.0, offsets[2]) + 0.55 * sample(cloud_volume, 23.0, offsets[3])
-    cover = _smoothstep(0.3, 1.1, cloud_density)
+    cloud_density = (sample(cloud_volume, 110.0, offsets[2]) + 0.5 * sample(cloud_volume, 25.0, offsets[3])
+                     + 0.25 * sample(cloud_volume, 6.0, offsets[4]))
+    cover = _smoothstep(0.45, 0.95, cloud_density)
     return _mix(colour, _rgb(238.0, 240.0, 245.0), cover)
 
 
@@ -279,9 +273,9 @@ def _orbit_earth_limb_sky(rng: np.random.Generator, width: int, height: int) -> 
     # Atmospheric glow above the limb, by the ray's tangent altitude (scale heights exaggerated to stay visible).
     tangent_altitude = np.sqrt(closest_approach_sq) - EARTH_RADIUS_KM
     altitude = np.maximum(tangent_altitude, 0.0)
-    inner_glow = np.exp(-altitude / 14.0)
-    outer_glow = np.exp(-altitude / 45.0)
-    glow = (outer_glow[..., None] * _rgb(30.0, 80.0, 215.0) + inner_glow[..., None] * _rgb(150.0, 175.0, 40.0))
+    inner_glow = np.exp(-altitude / 15.0)
+    outer_glow = np.exp(-altitude / 50.0)
+    glow = (outer_glow[..., None] * _rgb(25.0, 75.0, 220.0) + inner_glow[..., None] * _rgb(160.0, 180.0, 35.0))
     image = space * (1.0 - np.minimum(outer_glow * 1.5, 1.0))[..., None] + glow
 
     hit_directions = directions[hits_earth]
@@ -293,8 +287,8 @@ def _orbit_earth_limb_sky(rng: np.random.Generator, width: int, height: int) -> 
 
     # Aerial perspective: the view path through the air grows as the ray grazes the surface near the limb.
     cos_incidence = np.maximum(-np.sum(hit_directions * surface_km, axis=-1) / EARTH_RADIUS_KM, 0.0)
-    transmittance = np.exp(-0.28 / np.maximum(cos_incidence, 0.03))[:, None]
-    haze_colour = _rgb(140.0, 185.0, 245.0)
+    transmittance = np.exp(-0.16 / np.maximum(cos_incidence, 0.02))[:, None]
+    haze_colour = _rgb(125.0, 175.0, 245.0)
     image[hits_earth] = albedo * transmittance + haze_colour * (1.0 - transmittance)
     return image
 
@@ -345,8 +339,6 @@ def _periodic_voronoi(rng: np.random.Generator, size: int, cell_count: int) -> t
 
     dx, dy are the pixel's offset from its cell centre, all maps (size, size).
     """
-    from scipy.spatial import cKDTree
-
     centres = rng.uniform(0.0, size, (cell_count, 2))
     pixels = _pixel_grid(size)
     distances, cells = cKDTree(centres, boxsize=size).query(pixels, k=2)
@@ -385,11 +377,11 @@ def _martian_regolith(rng: np.random.Generator, size: int) -> np.ndarray:
 
 def _asteroid_rubble(rng: np.random.Generator, size: int) -> np.ndarray:
     shade = np.ones((size, size), dtype=np.float32)
-    for cell_count, weight in ((max(4, size * size // 2600), 1.0), (max(8, size * size // 330), 0.55)):
+    for cell_count, weight in ((max(4, size * size // 2600), 0.8), (max(8, size * size // 330), 0.6)):
         cell, distance, gap, dx, dy = _periodic_voronoi(rng, size, cell_count)
         cell_radius = np.sqrt(size * size / (np.pi * cell_count))
         cell_tone = rng.uniform(-0.18, 0.18, cell_count)[cell]
-        roundness = -0.25 * (distance / cell_radius) ** 2 - 0.12 * (dx + dy) / cell_radius
+        roundness = -0.2 * np.minimum(distance / cell_radius, 1.1) ** 2 - 0.1 * (dx + dy) / cell_radius
         crack = 1.0 - _smoothstep(0.0, 0.09 * cell_radius, gap)
         shade += weight * (cell_tone + roundness - 0.35 * crack)
     shade += 0.06 * _spectral_noise(rng, (size, size), slope=0.4)
