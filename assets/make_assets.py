@@ -10,11 +10,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from PIL import Image
 
-from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, cylinder_mesh
+from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, cylinder_mesh, translation_frame
 from mani_skill_space.procgen.asset_io import save_asset
+from mani_skill_space.procgen.peg_hole import METAL_FRICTION
 from mani_skill_space.procgen.textures import GROUND_KINDS, SKY_KINDS, make_ground_texture, make_sky_texture
 
 ASSET_ROOT = Path(__file__).resolve().parent
@@ -52,7 +52,66 @@ def make_sample_tube() -> Asset:
     )
 
 
-DATASET_OBJECTS = {"sample_tube": make_sample_tube}
+PROFILE_PEG_WIDTH = 0.020
+PROFILE_PEG_LENGTHS = {"short": 0.100, "long": 0.200}
+SOCKET_INNER = 0.022
+SOCKET_OUTER = 0.026
+SOCKET_DEPTH = 0.020
+POST_WIDTH = 0.050
+POST_HEIGHT = 0.080
+"""The reference socket stands 40 mm proud of the ground; ours stands on a taller post so that the entrance
+is at 0.1 m, close to the procedural module's 0.12 m top, keeping the two asset sources' workspaces alike."""
+ALUMINIUM = (0.75, 0.76, 0.78, 1.0)
+ANODISED = (0.3, 0.32, 0.36, 1.0)
+
+
+def make_profile_peg(length: float) -> Asset:
+    """The reference's 20 x 20 mm aluminium profile peg (a box; the reference also collides with its box).
+
+    Axis along z, centred. Both ends fit the socket, so both are ``end_*`` frames; 4-fold symmetric."""
+    half = np.array([PROFILE_PEG_WIDTH / 2, PROFILE_PEG_WIDTH / 2, length / 2])
+    mesh = box_mesh(half)
+    tip = translation_frame((0.0, 0.0, -length / 2))
+    head = np.diag([1.0, -1.0, -1.0, 1.0])
+    head[:3, 3] = (0.0, 0.0, length / 2)
+    return Asset(
+        name=f"profile_peg_{int(round(length * 1000))}mm",
+        visual_parts=(VisualPart(mesh, ALUMINIUM, roughness=0.35, metallic=0.8),),
+        collision_parts=(CollisionPart(mesh),),
+        density=2700.0 * 0.45,  # a hollow extrusion: about 45% of the box is aluminium
+        friction=METAL_FRICTION,
+        frames={"end_0": tip, "end_1": head},
+        info={"symmetry_order": 4, "ends": 2, "radius": PROFILE_PEG_WIDTH / 2, "height": length},
+    )
+
+
+def make_profile_socket() -> Asset:
+    """The reference's socket: 22 x 22 mm inside (1 mm clearance per side), 26 x 26 mm outside, 20 mm deep, on a
+    50 x 50 mm post. Origin at the post's base; every part is a box."""
+    top = POST_HEIGHT + SOCKET_DEPTH
+    wall = (SOCKET_OUTER - SOCKET_INNER) / 2
+    boxes = [box_mesh((POST_WIDTH / 2, POST_WIDTH / 2, POST_HEIGHT / 2), (0, 0, POST_HEIGHT / 2))]
+    centre_z = POST_HEIGHT + SOCKET_DEPTH / 2
+    for side in (-1, 1):
+        offset = (SOCKET_INNER + wall) / 2 * side
+        boxes.append(box_mesh((wall / 2, SOCKET_OUTER / 2, SOCKET_DEPTH / 2), (offset, 0, centre_z)))
+        boxes.append(box_mesh((SOCKET_INNER / 2, wall / 2, SOCKET_DEPTH / 2), (0, offset, centre_z)))
+    return Asset(
+        name="profile_socket",
+        visual_parts=tuple(VisualPart(b, ANODISED, roughness=0.5, metallic=0.5) for b in boxes),
+        collision_parts=tuple(CollisionPart(b) for b in boxes),
+        friction=METAL_FRICTION,
+        frames={"entrance": translation_frame((0, 0, top)), "bottom": translation_frame((0, 0, POST_HEIGHT))},
+        info={"depth": SOCKET_DEPTH, "clearance": (SOCKET_INNER - PROFILE_PEG_WIDTH) / 2, "symmetry_order": 4},
+    )
+
+
+DATASET_OBJECTS = {
+    "sample_tube": make_sample_tube,
+    "profile_peg_short": lambda: make_profile_peg(PROFILE_PEG_LENGTHS["short"]),
+    "profile_peg_long": lambda: make_profile_peg(PROFILE_PEG_LENGTHS["long"]),
+    "profile_socket": make_profile_socket,
+}
 
 
 def write_textures(root: Path = ASSET_ROOT) -> list[Path]:

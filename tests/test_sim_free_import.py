@@ -13,7 +13,7 @@ def test_sim_free_modules_import_without_sapien_or_maniskill():
                 return None  # as if SAPIEN and ManiSkill were not installed
             return path_finder(name, path, target)
         importlib.machinery.PathFinder.find_spec = classmethod(hide_simulator)
-        import mani_skill_space.procgen.rock, mani_skill_space.procgen.terrain, mani_skill_space.procgen.rover
+        import mani_skill_space.procgen.rock, mani_skill_space.procgen.terrain, mani_skill_space.procgen.mounts, mani_skill_space.procgen.peg_hole
         import mani_skill_space.domains, mani_skill_space.rewards, mani_skill_space.geometry
         assert "sapien" not in sys.modules and "mani_skill" not in sys.modules
         mani_skill_space.procgen.rock.make_rock(0)

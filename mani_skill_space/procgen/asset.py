@@ -44,6 +44,8 @@ class Asset:
     visual_parts: tuple[VisualPart, ...]
     collision_parts: tuple[CollisionPart, ...]
     density: float = 1000.0
+    friction: Optional[float] = None
+    """Static and dynamic friction coefficient of the surfaces; None: the scene's default (1.0 here)."""
     frames: Mapping[str, np.ndarray] = field(default_factory=dict)
     info: Mapping[str, Any] = field(default_factory=dict)
 

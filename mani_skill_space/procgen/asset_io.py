@@ -38,6 +38,7 @@ def save_asset(asset: Asset, directory: str | Path) -> Path:
     manifest = {
         "name": asset.name,
         "density": asset.density,
+        "friction": asset.friction,
         "visual_parts": visuals,
         "collision": collisions,
         "frames": {k: np.asarray(v).tolist() for k, v in asset.frames.items()},
@@ -71,6 +72,7 @@ def load_asset(directory: str | Path) -> Asset:
         visual_parts=visual_parts,
         collision_parts=collision_parts,
         density=manifest.get("density", 1000.0),
+        friction=manifest.get("friction"),
         frames={k: np.asarray(v) for k, v in manifest.get("frames", {}).items()},
         info=manifest.get("info", {}),
     )

@@ -6,7 +6,7 @@ import trimesh
 
 from mani_skill_space.procgen.asset import Asset, VisualPart
 from mani_skill_space.procgen.asset_io import load_asset, save_asset
-from mani_skill_space.procgen.rover import make_rover
+from mani_skill_space.procgen.mounts import make_rover
 
 
 def test_saved_asset_loads_back_identically(tmp_path):

@@ -1,7 +1,7 @@
 import numpy as np
 
 from mani_skill_space.procgen.asset import GPU_CONVEX_VERTEX_LIMIT
-from mani_skill_space.procgen.rover import ARM_MOUNT_HEIGHT, BIN_INNER_HEIGHT, make_rover
+from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT, BIN_INNER_HEIGHT, make_rover
 
 
 def test_rover_frames_put_the_arm_above_the_deck_and_the_bin_behind_it():
@@ -44,3 +44,15 @@ def test_base_camera_looks_forward_and_down():
     forward = camera[:3, 0]
     assert forward[0] > 0.5 and forward[2] < -0.3
     np.testing.assert_allclose(camera[:3, :3] @ camera[:3, :3].T, np.eye(3), atol=1e-12)
+
+
+def test_station_platform_is_the_ground_in_orbit_with_the_arm_and_camera_where_the_rover_has_them():
+    from mani_skill_space.procgen.mounts import make_station
+
+    station, rover = make_station(), make_rover()
+    for name in ("arm_mount", "base_camera"):
+        np.testing.assert_allclose(station.frames[name], rover.frames[name])
+    platform = station.collision_parts[0].mesh
+    assert platform.bounds[1, 2] == 0.0  # the top of the platform is the surface objects rest on
+    assert platform.bounds[0, 0] < -0.3 and platform.bounds[1, 0] > 0.9  # it reaches past the workspace
+    assert len(station.visual_parts) > len(station.collision_parts)  # the distant truss and wings are visual only
