@@ -22,11 +22,12 @@ import tyro
 import mani_skill_space
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.domains import DOMAINS
+from mani_skill_space.procgen.mounts import make_rover, make_station
+from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.procgen.rock import make_rock
-from mani_skill_space.procgen.rover import make_rover
 from mani_skill_space.procgen.terrain import make_terrain
 
-REFERENCES = {"SampleCollection-v1": "PickCube-v1"}
+REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1"}
 """The ManiSkill task each of our envs is compared with."""
 
 
@@ -122,7 +123,9 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators = {f"rock ({flavour})": (lambda seed, f=flavour: make_rock(seed, f)) for flavour in ("lunar", "martian")}
     for name in ("moon", "mars", "asteroid"):
         generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
+    generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     generators["rover"] = lambda seed: make_rover()
+    generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
     return generators
 

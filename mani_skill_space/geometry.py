@@ -37,3 +37,63 @@ def in_open_box(points: torch.Tensor, floor_centre: torch.Tensor, inner_half_siz
     offset = points - floor_centre
     within_walls = (offset[..., :2].abs() <= inner_half_size[..., :2]).all(dim=-1)
     return within_walls & (offset[..., 2] >= 0) & (offset[..., 2] <= 2 * inner_half_size[..., 2])
+
+
+def pose_matrix(position: torch.Tensor, quaternion: torch.Tensor) -> torch.Tensor:
+    """Homogeneous transforms (..., 4, 4) from positions (..., 3) and wxyz quaternions (..., 4)."""
+    matrix = torch.zeros(*position.shape[:-1], 4, 4, dtype=position.dtype, device=position.device)
+    matrix[..., :3, :3] = rotation_matrix(quaternion)
+    matrix[..., :3, 3] = position
+    matrix[..., 3, 3] = 1.0
+    return matrix
+
+
+def angle_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Angle (rad) between unit vectors along the last dimension."""
+    return torch.arccos(torch.clamp((a * b).sum(dim=-1), -1.0, 1.0))
+
+
+def twist_error(tip_x: torch.Tensor, hole_x: torch.Tensor, axis: torch.Tensor, symmetry_order: torch.Tensor) -> torch.Tensor:
+    """How far a peg is turned about the hole's axis from the nearest matching orientation, in [0, 1].
+
+    0 when the peg's reference direction ``tip_x`` matches the hole's ``hole_x`` up to a rotation by a multiple
+    of 2 pi / ``symmetry_order`` about ``axis``; 1 halfway between two matches. Order 0 means any rotation
+    matches (a round peg), order 1 only the identity.
+    """
+    sine = (torch.cross(tip_x, hole_x, dim=-1) * axis).sum(dim=-1)
+    cosine = (tip_x * hole_x).sum(dim=-1)
+    angle = torch.atan2(sine, cosine) % (2 * torch.pi)
+    order = symmetry_order.to(angle.dtype)
+    step = 2 * torch.pi / torch.clamp(order, min=1.0)
+    phase = torch.remainder(angle, step)
+    error = torch.minimum(phase, step - phase) / (step / 2)
+    return torch.where(order == 0, torch.zeros_like(error), error)
+
+
+def insertion_measures(
+    ends: torch.Tensor, valid: torch.Tensor, entrance: torch.Tensor, bottom: torch.Tensor, depth: torch.Tensor, symmetry_order: torch.Tensor
+) -> dict[str, torch.Tensor]:
+    """How far a peg is in a hole, per env, for the peg's insertable end nearest the entrance (``peg_end``).
+
+    ``ends`` (n, e, 4, 4): world poses of the peg's insertable ends (z into the peg, x its reference direction);
+    ``valid`` (n, e): which of them exist; ``entrance`` and ``bottom`` (n, 4, 4): the hole's frames (z out of
+    the hole); ``depth`` (n,); ``symmetry_order`` (n,). The inserted fraction is 1 at the bottom and 0 at the
+    entrance, measured along the hole's axis; the lateral offset is the tip's distance from that axis.
+    """
+    tips, tip_axes, tip_x = ends[..., :3, 3], ends[..., :3, 2], ends[..., :3, 0]
+    to_entrance = torch.linalg.norm(tips - entrance[:, None, :3, 3], dim=-1).masked_fill(~valid, float("inf"))
+    best = to_entrance.argmin(dim=1)
+    rows = torch.arange(len(best), device=best.device)
+    tip, tip_axis = tips[rows, best], tip_axes[rows, best]
+    hole_axis = bottom[:, :3, 2]
+    offset = tip - bottom[:, :3, 3]
+    axial = (offset * hole_axis).sum(dim=-1)
+    return dict(
+        peg_end=best,
+        lateral_offset=torch.linalg.norm(offset - axial[:, None] * hole_axis, dim=-1),
+        inserted_fraction=1.0 - axial / depth,
+        axis_angle=angle_between(tip_axis, hole_axis),
+        twist_error=twist_error(tip_x[rows, best], bottom[:, :3, 0], hole_axis, symmetry_order),
+        tip_to_entrance=to_entrance[rows, best],
+        tip_to_bottom=torch.linalg.norm(offset, dim=-1),
+    )

@@ -1,8 +1,9 @@
+import pytest
 import torch
 from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 from mani_skill.utils.structs.pose import Pose
 
-from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.geometry import in_open_box, insertion_measures, relative_pose, rotation_6d, rotation_matrix, twist_error
 
 NUM_ENVS = 8
 
@@ -48,3 +49,52 @@ def test_in_open_box_on_8_envs():
         ]
     )
     assert in_open_box(points, floor, half).tolist() == [True, True, False, False, False, False, True, False]
+
+
+def _frame(position, rotation=None):
+    frame = torch.eye(4)
+    frame[:3, 3] = torch.tensor(position, dtype=torch.float32)
+    if rotation is not None:
+        frame[:3, :3] = rotation
+    return frame
+
+
+def _rot_z(angle):
+    c, s = torch.cos(torch.tensor(angle)), torch.sin(torch.tensor(angle))
+    return torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_twist_error_respects_the_symmetry_order_on_8_envs():
+    angles = torch.tensor([0.0, torch.pi / 2, torch.pi / 4, torch.pi, torch.pi / 2, 0.3, torch.pi, torch.pi / 3])
+    orders = torch.tensor([4, 4, 4, 2, 2, 0, 1, 3])
+    tip_x = torch.stack([torch.cos(angles), torch.sin(angles), torch.zeros(8)], dim=-1)
+    hole_x = torch.tensor([[1.0, 0.0, 0.0]]).repeat(8, 1)
+    axis = torch.tensor([[0.0, 0.0, 1.0]]).repeat(8, 1)
+    error = twist_error(tip_x, hole_x, axis, orders)
+    torch.testing.assert_close(error, torch.tensor([0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0]), atol=1e-5, rtol=0)
+
+
+def test_insertion_measures_on_8_envs():
+    depth = torch.full((NUM_ENVS,), 0.02)
+    bottom = torch.stack([_frame([0.6, 0.0, 0.08])] * NUM_ENVS)
+    entrance = torch.stack([_frame([0.6, 0.0, 0.10])] * NUM_ENVS)
+    heights = [0.0, 0.002, 0.01, 0.02, 0.05, 0.0, 0.0, 0.0]
+    tilts = [0.0, 0.0, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0]
+    lateral = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.004, 0.0]
+    twists = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, torch.pi / 4]
+    tips = []
+    for h, tilt, dx, twist in zip(heights, tilts, lateral, twists):
+        c, s = torch.cos(torch.tensor(tilt)), torch.sin(torch.tensor(tilt))
+        tilted = torch.tensor([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]) @ _rot_z(twist)
+        tips.append(_frame([0.6 + dx, 0.0, 0.08 + h], tilted))
+    far_end = _frame([0.6, 0.0, 0.3])
+    ends = torch.stack([torch.stack([tip, far_end]) for tip in tips])
+    valid = torch.tensor([[True, True]] * NUM_ENVS)
+    m = insertion_measures(ends, valid, entrance, bottom, depth, torch.full((NUM_ENVS,), 4))
+    assert m["peg_end"].tolist() == [0] * NUM_ENVS  # the end nearer the entrance
+    torch.testing.assert_close(m["inserted_fraction"][:5], torch.tensor([1.0, 0.9, 0.5, 0.0, -1.5]), atol=1e-5, rtol=0)
+    assert m["axis_angle"][5].item() == pytest.approx(0.2, abs=1e-5) and m["axis_angle"][0].item() == pytest.approx(0.0, abs=1e-3)
+    assert m["lateral_offset"][6].item() == pytest.approx(0.004, abs=1e-6)
+    assert m["twist_error"][7].item() == pytest.approx(1.0, abs=1e-5) and m["twist_error"][0].item() == pytest.approx(0.0, abs=1e-5)
+    invalid_first = torch.tensor([[False, True]] * NUM_ENVS)
+    assert insertion_measures(ends, invalid_first, entrance, bottom, depth, torch.full((NUM_ENVS,), 4))["peg_end"].tolist() == [1] * NUM_ENVS

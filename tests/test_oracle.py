@@ -31,3 +31,14 @@ def test_oracle_gives_the_same_episode_for_the_same_seed():
 def test_unknown_env_has_no_oracle():
     with pytest.raises(ValueError, match="SampleCollection-v1"):
         oracle_for("PickCube-v1")
+
+
+@pytest.mark.parametrize(
+    "domain, asset_source, seed",
+    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 1), ("mars", "procedural", 100)],
+)
+def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
+    env = gym.make("PegInHoleAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("PegInHoleAssembly-v1"), seed)
+    assert result.success_at_end, (domain, asset_source, seed, result.failure)
+    env.close()

@@ -3,9 +3,13 @@
 from mani_skill.utils.registration import REGISTERED_ENVS
 
 from mani_skill_space.envs.base import SpaceManipulationEnv
+from mani_skill_space.envs.peg_in_hole_assembly import PegInHoleAssemblyEnv
 from mani_skill_space.envs.sample_collection import SampleCollectionEnv
 
-TASKS: dict[str, type[SpaceManipulationEnv]] = {"SampleCollection-v1": SampleCollectionEnv}
+TASKS: dict[str, type[SpaceManipulationEnv]] = {
+    "SampleCollection-v1": SampleCollectionEnv,
+    "PegInHoleAssembly-v1": PegInHoleAssemblyEnv,
+}
 
 
 def task_class(env_id: str) -> type[SpaceManipulationEnv]:
@@ -16,4 +20,4 @@ def task_class(env_id: str) -> type[SpaceManipulationEnv]:
     return TASKS[env_id]
 
 
-__all__ = ["SampleCollectionEnv", "SpaceManipulationEnv", "TASKS", "task_class"]
+__all__ = ["PegInHoleAssemblyEnv", "SampleCollectionEnv", "SpaceManipulationEnv", "TASKS", "task_class"]

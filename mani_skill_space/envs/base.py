@@ -23,14 +23,16 @@ import torch
 from mani_skill.agents.robots import Panda, PandaWristCam
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConfig, SceneConfig, SimConfig
 
 from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
-from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome
-from mani_skill_space.procgen.asset import Asset, look_at
-from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
+from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.asset import Asset, look_at
+from mani_skill_space.procgen.resting import resting_orientations
+from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
 from mani_skill_space.rewards import RewardTable, RewardTerm, action_rate
 
 SENSOR_SIZE = 64
@@ -274,3 +276,31 @@ class SpaceManipulationEnv(BaseEnv):
 def build_samples(env: SpaceManipulationEnv, assets: list[Asset], name: str) -> Any:
     """Per-env dynamic objects placed out of the way; ``_initialize_episode`` poses them."""
     return build_actor_per_env(env.scene, assets, name, body_type="dynamic", initial_pose=sapien.Pose(p=[0, 0, 2.0]))
+
+
+class RestingPlacement:
+    """Each env's object on flat ground, at rest: statically stable faces (``procgen.resting``), batched."""
+
+    def __init__(self, assets: list[Asset], device, exclude_axis: Optional[np.ndarray] = None):
+        self.points = padded_points([a.collision_vertices for a in assets], device)
+        rests = [resting_orientations(a.collision_vertices, exclude_axis=exclude_axis) for a in assets]
+        self.counts = torch.tensor([len(r) for r in rests], device=device)
+        self.quaternions = padded_points(rests, device)
+
+    def face_down(self, env_idx: torch.Tensor, uniform) -> torch.Tensor:
+        """wxyz orientations (b, 4) putting a stable face down, picked by ``uniform`` draws in [0, 1)."""
+        counts = self.counts[env_idx]
+        face = (torch.as_tensor(uniform, dtype=torch.float32, device=counts.device) * counts).long().clamp(max=counts - 1)
+        return self.quaternions[env_idx, face]
+
+    def height_on_ground(self, env_idx: torch.Tensor, quaternion: torch.Tensor, clearance: float) -> torch.Tensor:
+        """Height (b,) of the object's origin that puts its lowest point ``clearance`` above z = 0."""
+        lowest = torch.einsum("bij,bnj->bni", quaternion_to_matrix(quaternion), self.points[env_idx])[..., 2].amin(dim=1)
+        return clearance - lowest
+
+
+def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
+    """``quaternion`` (b, 4, wxyz) followed by a turn of ``yaw`` (b,) about the world z axis."""
+    half = yaw / 2
+    zeros = torch.zeros_like(half)
+    return quaternion_multiply(torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1), quaternion)

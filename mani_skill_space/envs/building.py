@@ -33,11 +33,12 @@ class AssetActorBuilder(ActorBuilder):
     def __init__(self):
         super().__init__()
         self._mesh_visuals: list[VisualPart] = []
-        self._mesh_collisions: list[tuple[CollisionPart, float]] = []
+        self._mesh_collisions: list[tuple[CollisionPart, float, physx.PhysxMaterial]] = []
 
     def add_asset(self, asset: Asset, with_mass: bool = True):
         self._mesh_visuals.extend(asset.visual_parts)
-        self._mesh_collisions.extend((part, asset.density) for part in asset.collision_parts)
+        material = physx.get_default_material() if asset.friction is None else physx.PhysxMaterial(asset.friction, asset.friction, 0.0)
+        self._mesh_collisions.extend((part, asset.density, material) for part in asset.collision_parts)
         if with_mass:
             mass, com, inertia = asset.mass_properties()
             principal, axes = np.linalg.eigh(inertia)
@@ -64,8 +65,8 @@ class AssetActorBuilder(ActorBuilder):
 
     def build_physx_component(self, link_parent=None):
         component = super().build_physx_component(link_parent)
-        for part, density in self._mesh_collisions:
-            shape = collision_shape(part)
+        for part, density, material in self._mesh_collisions:
+            shape = collision_shape(part, material)
             shape.set_collision_groups(self.collision_groups)
             shape.set_density(density)
             component.attach(shape)
@@ -99,10 +100,9 @@ def render_shape(part: VisualPart) -> sapien.render.RenderShapeTriangleMesh:
     )
 
 
-def collision_shape(part: CollisionPart):
+def collision_shape(part: CollisionPart, material: physx.PhysxMaterial):
     vertices = np.ascontiguousarray(part.mesh.vertices, dtype=np.float32)
     scale = np.ones(3, dtype=np.float32)
-    material = physx.get_default_material()
     if part.convex:
         return physx.PhysxCollisionShapeConvexMesh(vertices=vertices, scale=scale, material=material)
     triangles = np.ascontiguousarray(part.mesh.faces, dtype=np.uint32)

@@ -1,19 +1,15 @@
 from typing import Any
 
 import numpy as np
-import sapien
 import torch
-from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, build_samples
-from mani_skill_space.envs.building import padded_points
-from mani_skill_space.procgen.resting import resting_orientations
-from mani_skill_space.procgen.rock import make_rock
-from mani_skill_space.procgen.rover import make_rover
+from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, build_samples, turned_about_z
 from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.mounts import make_rover
+from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
 
 SAMPLE_X_RANGE = (0.45, 0.65)
@@ -81,12 +77,8 @@ class SampleCollectionEnv(SpaceManipulationEnv):
         else:
             assets = [load_dataset_object("sample_tube")] * self.num_envs
         self.sample = build_samples(self, assets, "sample")
-        self._sample_points = padded_points([a.collision_vertices for a in assets], self.device)
         # a tube lies flat: it never rests on its end caps
-        axis = np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None
-        rests = [resting_orientations(a.collision_vertices, exclude_axis=axis) for a in assets]
-        self._resting_counts = torch.tensor([len(r) for r in rests], device=self.device)
-        self._resting_quats = padded_points(rests, self.device)
+        self._placement = RestingPlacement(assets, self.device, exclude_axis=np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None)
         bin_frame = self.mount.frames["bin"]
         self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
         self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
@@ -97,23 +89,13 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
             xy = np.stack([rng.uniform(*SAMPLE_X_RANGE), rng.uniform(*SAMPLE_Y_RANGE)], axis=-1)
-            quat = self._resting_orientation(env_idx, rng)
-            points = self._sample_points[env_idx]
-            lowest = torch.einsum("bij,bnj->bni", quaternion_to_matrix(quat), points)[..., 2].amin(dim=1)
+            resting = self._placement.face_down(env_idx, rng.uniform(0.0, 1.0))
+            quat = turned_about_z(resting, torch.as_tensor(rng.uniform(-np.pi, np.pi), dtype=torch.float32))
             position = torch.zeros((b, 3))
             position[:, :2] = torch.as_tensor(xy, dtype=torch.float32)
-            position[:, 2] = SAMPLE_DROP_CLEARANCE - lowest
+            position[:, 2] = self._placement.height_on_ground(env_idx, quat, SAMPLE_DROP_CLEARANCE)
             self.sample.set_pose(Pose.create_from_pq(position, quat))
             self._sample_start_height[env_idx] = position[:, 2]
-
-    def _resting_orientation(self, env_idx: torch.Tensor, rng) -> torch.Tensor:
-        """A random statically stable face of each sample turned down, then a random heading (wxyz, (b, 4))."""
-        face = torch.as_tensor(rng.uniform(0.0, 1.0), dtype=torch.float32) * self._resting_counts[env_idx]
-        face = face.long().clamp(max=self._resting_counts[env_idx] - 1)
-        resting = self._resting_quats[env_idx, face]
-        heading = torch.as_tensor(rng.uniform(-np.pi, np.pi), dtype=torch.float32)
-        turn = torch.stack([torch.cos(heading / 2), torch.zeros_like(heading), torch.zeros_like(heading), torch.sin(heading / 2)], -1)
-        return quaternion_multiply(turn, resting)
 
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)

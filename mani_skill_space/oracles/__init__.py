@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from mani_skill_space.oracles.base import Oracle, PlanningFailed
+from mani_skill_space.oracles.peg_in_hole import PegInHoleOracle
 from mani_skill_space.oracles.sample_collection import SampleCollectionOracle
 
-ORACLES: dict[str, type[Oracle]] = {"SampleCollection-v1": SampleCollectionOracle}
+ORACLES: dict[str, type[Oracle]] = {"SampleCollection-v1": SampleCollectionOracle, "PegInHoleAssembly-v1": PegInHoleOracle}
 
 
 def oracle_for(env_id: str) -> Oracle:

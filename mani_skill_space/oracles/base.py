@@ -11,7 +11,8 @@ seed gives the same demonstration.
 
 from __future__ import annotations
 
-from typing import Iterator, Optional
+from contextlib import contextmanager
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -22,6 +23,10 @@ from mani_skill_space.policies import Policy
 GRIPPER_OPEN = 1.0
 GRIPPER_CLOSED = -1.0
 SURFACE_POINTS_PER_PART = 256
+POINT_SPACING = 0.02
+"""About one obstacle point per 2 x 2 cm of surface: no arm link fits between them."""
+GROUND_REACH = 1.0
+GROUND_MARGIN = 0.02
 JOINT_VELOCITY_LIMIT = 2.0
 JOINT_ACCELERATION_LIMIT = 4.0
 """rad/s and rad/s^2 for every arm joint: about 0.9x the Panda's velocity limits (ManiSkill's solutions use 0.9
@@ -39,26 +44,31 @@ class Oracle(Policy):
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
         self.gripper = GRIPPER_OPEN
+        self.last_action: Optional[np.ndarray] = None
         self.done = False
         self.failure: Optional[str] = None
         self._actions = self.plan(self.env)
 
     def act(self, obs) -> np.ndarray:
+        """The plan's next action; once the plan has ended, its last target is held (not the joints' current
+        positions, which would let go of whatever the arm is pressing on)."""
         if not self.done:
             try:
-                return next(self._actions)
+                self.last_action = next(self._actions)
+                return self.last_action
             except StopIteration:
                 self.done = True
             except PlanningFailed as error:
                 self.done, self.failure = True, str(error)
-        return self.hold_action()
+        return self.last_action if self.last_action is not None else self.hold_action()
 
     def plan(self, env) -> Iterator[np.ndarray]:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ building blocks
-    def make_solver(self, env) -> PandaArmMotionPlanningSolver:
-        """ManiSkill's Panda planner at the arm's mount, aware of the static mount (rover, bin, ...)."""
+    def make_solver(self, env, obstacles: Optional[np.ndarray] = None) -> PandaArmMotionPlanningSolver:
+        """ManiSkill's Panda planner at the arm's mount, aware of the static mount (rover, bin, ...), the ground
+        and any ``obstacles`` points (world frame)."""
         solver = PandaArmMotionPlanningSolver(
             env,
             debug=False,
@@ -70,6 +80,11 @@ class Oracle(Policy):
             joint_acc_limits=JOINT_ACCELERATION_LIMIT,
         )
         points = _surface_points(env.mount, np.random.default_rng(0))
+        # the surface the arm stands on (ground or the station's platform) is a grid a little below it, so that
+        # the fingers may touch it but no link is planned into it
+        points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()])
+        if obstacles is not None:
+            points = np.concatenate([points, obstacles])
         solver.add_collision_pts(points)
         solver.use_point_cloud = True
         self.solver = solver
@@ -81,13 +96,25 @@ class Oracle(Policy):
     def hold_action(self) -> np.ndarray:
         return np.hstack([self.arm_qpos(), self.gripper]).astype(np.float32)
 
-    def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0) -> Iterator[np.ndarray]:
+    def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0, speed: float = 1.0) -> Iterator[np.ndarray]:
         """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
-        collision-free IK solution); ``settle_steps`` more steps hold the goal so the arm catches up."""
-        positions = self._screw_path(self.arm_qpos(), pose)
-        if positions is None:
-            positions = self._joint_path(pose, what)
+        collision-free IK solution) at ``speed`` times the usual joint limits; ``settle_steps`` more steps hold
+        the goal so the arm catches up."""
+        with self._speed(speed):
+            positions = self._screw_path(self.arm_qpos(), pose)
+            if positions is None:
+                positions = self._joint_path(pose, what)
         yield from self._follow(np.concatenate([positions, np.repeat(positions[-1:], settle_steps, axis=0)]))
+
+    @contextmanager
+    def _speed(self, scale: float):
+        planner = self.solver.planner
+        velocity, acceleration = planner.joint_vel_limits, planner.joint_acc_limits
+        planner.joint_vel_limits, planner.joint_acc_limits = velocity * scale, acceleration * scale
+        try:
+            yield
+        finally:
+            planner.joint_vel_limits, planner.joint_acc_limits = velocity, acceleration
 
     def _joint_path(self, pose: sapien.Pose, what: str) -> np.ndarray:
         start = self.arm_qpos()
@@ -104,6 +131,8 @@ class Oracle(Policy):
         yield from self._follow(self._timed_path(start, goal))
 
     def _timed_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        if np.abs(goal - start).max() < 1e-4:  # already there (the parameterisation needs a path to follow)
+            return goal[None]
         _, positions, _, _, _ = self.solver.planner.TOPP(np.stack([start, goal]), step=self.env.control_timestep)
         return np.concatenate([positions, goal[None]])
 
@@ -127,21 +156,38 @@ class Oracle(Policy):
     def _screw_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Joint positions of a collision-free screw motion of the TCP from ``start`` to ``pose``, if any."""
         planner = self.solver.planner
-        result = planner.plan_screw(
-            np.concatenate([pose.p, pose.q]),
-            planner.pad_qpos(start.copy()),
-            time_step=self.env.control_timestep,
-            use_point_cloud=self.solver.use_point_cloud,
-        )
+        try:
+            result = planner.plan_screw(
+                np.concatenate([pose.p, pose.q]),
+                planner.pad_qpos(start.copy()),
+                time_step=self.env.control_timestep,
+                use_point_cloud=self.solver.use_point_cloud,
+            )
+        except RuntimeError:  # mplib cannot time-parameterise a path of (almost) zero length: already there
+            return np.asarray(start)[None]
         return result["position"] if result["status"] == "Success" else None
 
     def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
         planner = self.solver.planner
         for t in np.linspace(0.0, 1.0, samples):
             qpos = planner.pad_qpos(start + t * (goal - start))
-            if planner.check_for_self_collision(planner.robot, qpos) or planner.check_for_env_collision(planner.robot, qpos):
+            collides = planner.check_for_env_collision(planner.robot, qpos, with_point_cloud=self.solver.use_point_cloud)
+            if collides or planner.check_for_self_collision(planner.robot, qpos):
                 return False
         return True
+
+    def servo(self, target: Callable[[int], sapien.Pose], steps: int, what: str) -> Iterator[np.ndarray]:
+        """Closed-loop Cartesian servo: at every step, the TCP pose ``target(step)`` (recomputed from the scene as
+        it is now), solved by IK from the current joints and sent as the joint target. Where a step's pose has no
+        solution (e.g. pressing past a stop) the previous target is held."""
+        planner = self.solver.planner
+        command = self.hold_action()
+        for step in range(steps):
+            goal = self.solver.base_pose.inv() * target(step)
+            status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(self.arm_qpos()), n_init_qpos=1)
+            if status == "Success":
+                command = np.hstack([solutions[0][: len(self.arm_qpos())], self.gripper]).astype(np.float32)
+            yield command
 
     def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
         """Hold still until the task has reported success for ``stable_steps`` steps in a row (e.g. a released
@@ -168,12 +214,29 @@ def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:
     return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(count, dof))
 
 
+def surface_points(asset, pose: np.ndarray = np.eye(4)) -> np.ndarray:
+    """Obstacle points on an asset's collision parts, placed at ``pose`` (world frame)."""
+    points = _surface_points(asset, np.random.default_rng(0))
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
 def _surface_points(asset, rng: np.random.Generator) -> np.ndarray:
     """Points on the collision parts of a static asset, as the planner's obstacle point cloud (world frame)."""
     import trimesh
 
-    samples = [trimesh.sample.sample_surface(part.mesh, SURFACE_POINTS_PER_PART, seed=rng)[0] for part in asset.collision_parts]
+    samples = []
+    for part in asset.collision_parts:
+        count = max(SURFACE_POINTS_PER_PART, int(part.mesh.area / POINT_SPACING**2))
+        samples.append(trimesh.sample.sample_surface(part.mesh, count, seed=rng)[0])
     return np.concatenate(samples)
+
+
+def _ground_points() -> np.ndarray:
+    """A grid of points GROUND_MARGIN under the ground around the arm."""
+    axis = np.arange(-GROUND_REACH, GROUND_REACH + POINT_SPACING / 2, POINT_SPACING)
+    x, y = np.meshgrid(axis, axis)
+    keep = np.hypot(x, y) <= GROUND_REACH
+    return np.stack([x[keep], y[keep], np.full(keep.sum(), -GROUND_MARGIN)], axis=1)
 
 
 def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose:

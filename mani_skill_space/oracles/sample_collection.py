@@ -7,7 +7,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, top_down_grasp_pose
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, top_down_grasp_pose
 
 PRE_GRASP_HEIGHT = 0.08
 SETTLE_STEPS = 4

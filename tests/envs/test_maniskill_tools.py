@@ -12,7 +12,7 @@ import mani_skill_space  # noqa: F401
 
 
 def _cpu_env():
-    import mani_skill_space  # noqa: F401  (registers the envs in the spawned worker)
+    import mani_skill_space  # noqa: F401,F811  (registers the envs in the spawned worker)
 
     return CPUGymWrapper(gym.make("SampleCollection-v1", obs_mode="state", render_backend="none"), record_metrics=True)
 

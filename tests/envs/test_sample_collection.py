@@ -111,7 +111,7 @@ def test_bad_kwargs_raise_errors_naming_the_valid_choices(kwargs, message):
 
 def _sample_state(env):
     u = env.unwrapped
-    return u._sample_points.clone(), u.sample.pose.raw_pose.clone(), u.agent.robot.get_qpos().clone()
+    return u._placement.points.clone(), u.sample.pose.raw_pose.clone(), u.agent.robot.get_qpos().clone()
 
 
 def test_same_seed_gives_the_same_rock_and_initial_state():
@@ -144,15 +144,15 @@ def test_same_seed_and_actions_give_the_same_rollout_on_cpu():
 def test_reconfiguration_resamples_the_rock():
     env = make()
     env.reset(seed=1)
-    first = env.unwrapped._sample_points.clone()
+    first = env.unwrapped._placement.points.clone()
     env.reset(seed=2)
-    assert env.unwrapped._sample_points.shape != first.shape or not torch.equal(env.unwrapped._sample_points, first)
+    assert env.unwrapped._placement.points.shape != first.shape or not torch.equal(env.unwrapped._placement.points, first)
     env.close()
     env = make(reconfiguration_freq=0)
     env.reset(seed=1)
-    kept = env.unwrapped._sample_points.clone()
+    kept = env.unwrapped._placement.points.clone()
     env.reset(seed=2)
-    torch.testing.assert_close(env.unwrapped._sample_points, kept)
+    torch.testing.assert_close(env.unwrapped._placement.points, kept)
     env.close()
 
 

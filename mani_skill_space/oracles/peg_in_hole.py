@@ -1,0 +1,177 @@
+"""Oracle for PegInHoleAssembly-v1.
+
+Before touching the peg it plans the insertion: the hand will take the lying peg from above, tilted toward the
+peg's tip, which fixes how it will hold the peg over the hole for each twist the profile's symmetry allows;
+the first twist (the hand pointing down and away from the arm first) for which the arm can line the peg up
+above the entrance and push it straight to the bottom wins. Then: grasp, lift, line the tip up above
+the entrance, re-measure the peg in the hand and correct twice, and servo the tip down the hole's axis,
+re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that).
+"""
+
+from __future__ import annotations
+
+from typing import Iterator, Optional
+
+import numpy as np
+import sapien
+
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, surface_points
+
+PRE_GRASP_DISTANCE = 0.08
+LIFT_HEIGHT = 0.3
+PAD_REACH = 0.016
+"""How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
+GRASP_TILT; they must stay above the module while the peg goes in."""
+FINGER_MARGIN = 0.006
+HEAD_OVERHANG = 0.005
+"""The grasp point may be this close to the peg's head: the pads may overhang its end."""
+GRASP_TILTS = np.radians([45.0, 30.0, 60.0])
+"""The hand takes the lying peg tilted toward the peg's tip by one of these angles (the first that works).
+Turned tip-down over the hole, the peg then hangs from a hand pointing below level, its body rising away from
+the module's top: a level hand would hit the block beside a short peg."""
+ROUND_PEG_TWISTS = 8
+"""Candidate twists tried for a peg that fits the hole at any twist."""
+APPROACH_GAP = 0.1
+"""The arm swings the peg over the hole with its tip this far above the entrance, on the hole's axis."""
+PRE_INSERT_GAP = 0.03
+"""How far above the entrance the tip is lined up before going in."""
+REFINE_PASSES = 2
+INSERT_STEP = 0.0025
+"""How far (m) the tip goes down the hole's axis per control step while inserting."""
+PRESS_DEPTH = 0.003
+"""The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
+SETTLE_STEPS = 4
+AXIS_KEEPOUT = 0.04
+"""The module's surface within this distance (m) of the peg's side, around the hole's axis, is left out of
+the planner's obstacles: the fingers holding the peg come that close to it."""
+
+
+class PegInHoleOracle(Oracle):
+    def plan(self, env) -> Iterator[np.ndarray]:
+        self.make_solver(env, obstacles=self._module_points(env))
+        end = self._end_toward_arm(env)
+        bottom = env._bottom[0].cpu().numpy().astype(np.float64)
+        depth = float(env._depth[0])
+        grasp, twist = self._plan_grasp(env, end, bottom, depth)
+
+        yield from self.screw_to(_backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
+        yield from self.screw_to(grasp, "grasp", SETTLE_STEPS)
+        yield from self.set_gripper(GRIPPER_CLOSED)
+        if not bool(env.evaluate()["is_grasped"][0]):
+            raise PlanningFailed("the grasp missed the peg")
+        yield from self.screw_to(_at_height(self._tcp(), LIFT_HEIGHT), "lift")
+
+        arm = self._line_up(env, end, bottom, depth, twist)
+        yield from self.joint_move(arm, "over the hole")
+        for _ in range(REFINE_PASSES + 1):  # re-measure the peg in the hand each time: it may have slipped
+            yield from self.screw_to(self._tcp_for_tip(env, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+        start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
+        steps = int(np.ceil((start - finish) / INSERT_STEP))
+        height = lambda step: max(finish, start - (step + 1) * INSERT_STEP)  # noqa: E731
+        yield from self.servo(lambda step: self._tcp_for_tip(env, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+        yield from self.wait_for_success(20)
+
+    # ------------------------------------------------------------------ planning
+    def _plan_grasp(self, env, end: int, bottom: np.ndarray, depth: float) -> tuple[sapien.Pose, float]:
+        tip = self._end_frame(env, end)
+        outward = bottom[:3, 3] - self.solver.base_pose.p
+        outward[2] = 0.0
+        outward /= np.linalg.norm(outward)
+        for tilt in GRASP_TILTS:
+            grasp = self._grasp_pose(env, tip, tilt)
+            if not (self.ik_solutions(grasp) and self.ik_solutions(_backed_off(grasp, PRE_GRASP_DISTANCE))):
+                continue
+            tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
+            hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
+            # the hand pointing down and away from the arm first
+            score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
+            for twist in sorted(_twists(int(env._symmetry[0])), key=score):
+                if self._insertion_arm(bottom, depth, twist, tip_in_hand) is not None:
+                    return grasp, float(twist)
+        raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+
+    def _line_up(self, env, end: int, bottom: np.ndarray, depth: float, twist: float) -> np.ndarray:
+        """An arm configuration for the planned twist, given how the hand really holds the peg now."""
+        tip_in_hand = np.linalg.inv(self._tcp().to_transformation_matrix()) @ self._end_frame(env, end)
+        arm = self._insertion_arm(bottom, depth, twist, tip_in_hand, start=self.arm_qpos())
+        if arm is None:
+            raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
+        return arm
+
+    def _insertion_arm(self, bottom, depth, twist, tip_in_hand, start: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """An arm configuration holding the tip over the hole on its axis (with ``tip_in_hand``) from which a
+        straight push reaches the bottom, and (given ``start``) a straight joint move reaches it; None if there
+        is none."""
+        hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
+        pressed = hand(-PRESS_DEPTH)
+        for arm in self.ik_solutions(hand(depth + APPROACH_GAP)):
+            if (start is None or self.path_is_free(start, arm)) and self.screw_is_feasible(arm, pressed):
+                return arm
+        return None
+
+    def _grasp_pose(self, env, tip: np.ndarray, tilt: float) -> sapien.Pose:
+        """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip, with the finger pads
+        far enough from the tip to stay out of the hole."""
+        axis = tip[:3, 2]
+        height, depth = float(env._peg_height[0]), float(env._depth[0])
+        reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
+        closing = np.cross(axis, [0.0, 0.0, 1.0])
+        closing /= np.linalg.norm(closing)
+        upward = np.cross(closing, axis)
+        upward *= np.sign(upward[2])
+        approach = -np.sin(tilt) * axis - np.cos(tilt) * upward
+        return env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
+
+    def _end_toward_arm(self, env) -> int:
+        """Of the insertable ends, the one nearest the arm: the hand, tilted toward the tip, then comes from the
+        far side of the peg and keeps clear of the rover."""
+        ends = env.peg_end_frames()[0].cpu().numpy()
+        valid = env._peg_end_valid[0].cpu().numpy()
+        distance = [np.linalg.norm(ends[i][:2, 3] - self.solver.base_pose.p[:2]) if valid[i] else np.inf for i in range(len(ends))]
+        return int(np.argmin(distance))
+
+    @staticmethod
+    def _module_points(env) -> np.ndarray:
+        """The hole module as obstacle points, except around the hole's axis where the peg and fingers go in."""
+        module = np.eye(4)
+        module[:3, 3] = env.hole_module.pose.p[0].cpu().numpy()
+        points = surface_points(env.hole_assets[0], module)
+        bottom = env._bottom[0].cpu().numpy()
+        offset = points - bottom[:3, 3]
+        along = offset @ bottom[:3, 2]
+        lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
+        return points[lateral > float(env._peg_radius[0]) + AXIS_KEEPOUT]
+
+    # ------------------------------------------------------------------ measuring
+    def _tcp_for_tip(self, env, end: int, tip_goal: np.ndarray) -> sapien.Pose:
+        """The TCP pose that puts the peg's end at ``tip_goal``, given how the hand holds the peg right now."""
+        tip_in_tcp = np.linalg.inv(self._tcp().to_transformation_matrix()) @ self._end_frame(env, end)
+        return sapien.Pose(tip_goal @ np.linalg.inv(tip_in_tcp))
+
+    def _tcp(self) -> sapien.Pose:
+        return self.env.agent.tcp.pose.sp
+
+    @staticmethod
+    def _end_frame(env, end: int) -> np.ndarray:
+        return env.peg_end_frames()[0, end].cpu().numpy().astype(np.float64)
+
+
+def _twists(order: int) -> np.ndarray:
+    count = ROUND_PEG_TWISTS if order == 0 else order
+    return np.arange(count) * 2 * np.pi / count
+
+
+def _along_axis(bottom: np.ndarray, twist: float, height: float) -> np.ndarray:
+    """The hole's bottom frame turned by ``twist`` about its axis and raised ``height`` along it."""
+    c, s = np.cos(twist), np.sin(twist)
+    turn = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, height], [0, 0, 0, 1]])
+    return bottom @ turn
+
+
+def _backed_off(pose: sapien.Pose, distance: float) -> sapien.Pose:
+    """``pose`` moved back along its approach direction (TCP z)."""
+    return pose * sapien.Pose([0.0, 0.0, -distance])
+
+
+def _at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
+    return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
