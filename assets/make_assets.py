@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from PIL import Image
 
 from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, cylinder_mesh, translation_frame
@@ -106,11 +107,40 @@ def make_profile_socket() -> Asset:
     )
 
 
+CUBESAT_SCALE = 0.4
+"""The standard 10 cm CubeSat unit at 40%, 4 cm (ManiSkill's PickCube size): the Panda's fingers open to 8 cm,
+so a full-size bus could not be grasped, and a tumbling cube must fit between them whichever way it turns
+(a 4 cm cube's body diagonal is 6.9 cm; the reference scaled its model to 5 cm, 8.7 cm corner to corner)."""
+CUBESAT_UNIT = 0.1 * CUBESAT_SCALE
+CUBESAT_HEIGHTS = {"1u": 0.1135 * CUBESAT_SCALE, "3u": 0.3405 * CUBESAT_SCALE}
+CUBESAT_RAIL = 0.0085 * CUBESAT_SCALE
+
+
+def make_cubesat(units: str) -> Asset:
+    """A 1U or 3U CubeSat at 40% scale: a body with solar cells between four corner rails, 1330 kg/m^3."""
+    height = CUBESAT_HEIGHTS[units]
+    half = CUBESAT_UNIT / 2
+    rail = CUBESAT_RAIL
+    body = box_mesh((half - 0.0008, half - 0.0008, height / 2 - 0.002))
+    rails = [box_mesh((rail / 2, rail / 2, height / 2), (x * (half - rail / 2), y * (half - rail / 2), 0.0)) for x in (-1, 1) for y in (-1, 1)]
+    solid = trimesh.boolean.union([body, *rails], engine="manifold")
+    return Asset(
+        name=f"cubesat_{units}",
+        visual_parts=(VisualPart(body, (0.08, 0.12, 0.4, 1.0), roughness=0.3, metallic=0.4), *(VisualPart(r, ALUMINIUM, roughness=0.35, metallic=0.8) for r in rails)),
+        collision_parts=tuple(CollisionPart(m) for m in (body, *rails)),
+        density=1330.0,
+        solid=solid,
+        info={"kind": "cubesat", "extents": solid.extents.tolist()},
+    )
+
+
 DATASET_OBJECTS = {
     "sample_tube": make_sample_tube,
     "profile_peg_short": lambda: make_profile_peg(PROFILE_PEG_LENGTHS["short"]),
     "profile_peg_long": lambda: make_profile_peg(PROFILE_PEG_LENGTHS["long"]),
     "profile_socket": make_profile_socket,
+    "cubesat_1u": lambda: make_cubesat("1u"),
+    "cubesat_3u": lambda: make_cubesat("3u"),
 }
 
 

@@ -22,12 +22,13 @@ import tyro
 import mani_skill_space
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.domains import DOMAINS
+from mani_skill_space.procgen.debris import make_debris
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.procgen.terrain import make_terrain
 
-REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1"}
+REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1", "DebrisCapture-v1": "PickCube-v1"}
 """The ManiSkill task each of our envs is compared with."""
 
 
@@ -124,6 +125,7 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     for name in ("moon", "mars", "asteroid"):
         generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
+    generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")

@@ -97,3 +97,57 @@ def insertion_measures(
         tip_to_entrance=to_entrance[rows, best],
         tip_to_bottom=torch.linalg.norm(offset, dim=-1),
     )
+
+
+
+def quaternion_multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Hamilton products a * b of wxyz quaternions (..., 4)."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack(
+        (
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ),
+        dim=-1,
+    )
+
+
+def rotation_vector(quaternion: torch.Tensor) -> torch.Tensor:
+    """Axis times angle (..., 3) of unit wxyz quaternions, the short way round (angle in [0, pi])."""
+    quaternion = torch.where(quaternion[..., :1] < 0, -quaternion, quaternion)
+    sine = torch.linalg.norm(quaternion[..., 1:], dim=-1, keepdim=True)
+    angle = 2 * torch.atan2(sine, quaternion[..., :1])
+    # angle / sin(angle / 2) -> 2 as the angle -> 0
+    scale = torch.where(sine > 1e-7, angle / sine.clamp_min(1e-7), torch.full_like(sine, 2.0))
+    return quaternion[..., 1:] * scale
+
+
+def step_velocities(
+    last_position: torch.Tensor, last_quaternion: torch.Tensor, position: torch.Tensor, quaternion: torch.Tensor, dt: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean linear (..., 3) and angular (..., 3, world frame) velocity of a body that moved from one wxyz pose to
+    the next in ``dt`` seconds (turning the short way round, so at most pi per step)."""
+    inverse = last_quaternion * torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=last_quaternion.dtype, device=last_quaternion.device)
+    turn = quaternion_multiply(quaternion, inverse)
+    return (position - last_position) / dt, rotation_vector(turn) / dt
+
+
+def rotation_angle(rotation: torch.Tensor) -> torch.Tensor:
+    """Angle (rad) of rotation matrices (..., 3, 3)."""
+    trace = rotation.diagonal(dim1=-2, dim2=-1).sum(dim=-1)
+    return torch.arccos(torch.clamp((trace - 1.0) / 2.0, -1.0, 1.0))
+
+
+def pose_error(pose: torch.Tensor, target: torch.Tensor, half_turn_symmetric: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """Distance (...,) and rotation angle (...,) between poses (..., 4, 4); with ``half_turn_symmetric`` the
+    target may also be turned half a turn about its own z axis (an object that looks the same both ways)."""
+    distance = torch.linalg.norm(pose[..., :3, 3] - target[..., :3, 3], dim=-1)
+    relative = target[..., :3, :3].transpose(-1, -2) @ pose[..., :3, :3]
+    angle = rotation_angle(relative)
+    if half_turn_symmetric:
+        half_turn = torch.diag(torch.tensor([-1.0, -1.0, 1.0], dtype=pose.dtype, device=pose.device))
+        angle = torch.minimum(angle, rotation_angle(half_turn @ relative))
+    return distance, angle

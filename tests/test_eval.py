@@ -17,7 +17,7 @@ env_id = "SampleCollection-v1"
 kwargs = { domain = "mars", asset_source = "dataset" }
 
 [[configurations]]
-env_id = "DebrisCapture-v1"
+env_id = "SolarPanelAssembly-v1"
 kwargs = { domain = "orbit" }
 """
 
@@ -39,7 +39,7 @@ def test_cli_writes_a_well_formed_table_and_json(suite, tmp_path, capsys):
     rows = [line for line in table if line.startswith("| ") and not line.startswith("| configuration")]
     assert len(rows) == 4  # 2 configurations x 2 policies
     assert all(line.count("|") == 8 for line in table if line.startswith("|"))
-    assert "not available: task not implemented yet" in rows[2] and "DebrisCapture-v1" in rows[2]
+    assert "not available: task not implemented yet" in rows[2] and "SolarPanelAssembly-v1" in rows[2]
     assert "% [" in rows[0]
     saved = json.loads((tmp_path / "out" / "results.json").read_text())
     assert saved == json.loads(json.dumps(report))

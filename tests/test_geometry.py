@@ -1,9 +1,19 @@
 import pytest
 import torch
-from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+from mani_skill.utils.geometry.rotation_conversions import axis_angle_to_quaternion, quaternion_to_matrix
 from mani_skill.utils.structs.pose import Pose
 
-from mani_skill_space.geometry import in_open_box, insertion_measures, relative_pose, rotation_6d, rotation_matrix, twist_error
+from mani_skill_space.geometry import (
+    in_open_box,
+    insertion_measures,
+    quaternion_multiply,
+    relative_pose,
+    rotation_6d,
+    rotation_matrix,
+    rotation_vector,
+    step_velocities,
+    twist_error,
+)
 
 NUM_ENVS = 8
 
@@ -98,3 +108,25 @@ def test_insertion_measures_on_8_envs():
     assert m["twist_error"][7].item() == pytest.approx(1.0, abs=1e-5) and m["twist_error"][0].item() == pytest.approx(0.0, abs=1e-5)
     invalid_first = torch.tensor([[False, True]] * NUM_ENVS)
     assert insertion_measures(ends, invalid_first, entrance, bottom, depth, torch.full((NUM_ENVS,), 4))["peg_end"].tolist() == [1] * NUM_ENVS
+
+
+def test_step_velocities_recover_known_motions_on_8_envs():
+    generator = torch.Generator().manual_seed(0)
+    velocity = torch.randn(NUM_ENVS, 3, generator=generator)
+    spin = torch.randn(NUM_ENVS, 3, generator=generator) * 3  # up to ~10 rad/s
+    spin[0] = 0.0  # no turn at all
+    spin[1] = torch.tensor([0.0, 0.0, 1e-5])  # almost none
+    dt = 0.05
+    start_q = axis_angle_to_quaternion(torch.randn(NUM_ENVS, 3, generator=generator))
+    start_q[2] = -start_q[2]  # the same orientation, the other sign
+    start_p = torch.randn(NUM_ENVS, 3, generator=generator)
+    end_q = quaternion_multiply(axis_angle_to_quaternion(spin * dt), start_q)  # turned about world axes
+    end_q[3] = -end_q[3]
+    linear, angular = step_velocities(start_p, start_q, start_p + velocity * dt, end_q, dt)
+    torch.testing.assert_close(linear, velocity, atol=1e-4, rtol=1e-4)
+    torch.testing.assert_close(angular, spin, atol=1e-3, rtol=1e-3)
+
+
+def test_rotation_vector_takes_the_short_way_round():
+    turn = torch.tensor([[0.0, 0.0, 1.5 * torch.pi]])  # three quarters of a turn = a quarter turn back
+    torch.testing.assert_close(rotation_vector(axis_angle_to_quaternion(turn)), torch.tensor([[0.0, 0.0, -0.5 * torch.pi]]))

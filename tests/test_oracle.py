@@ -42,3 +42,11 @@ def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
     result = run_episode(env, oracle_for("PegInHoleAssembly-v1"), seed)
     assert result.success_at_end, (domain, asset_source, seed, result.failure)
     env.close()
+
+
+@pytest.mark.parametrize("domain, asset_source, seed", [("orbit", "dataset", 10), ("orbit", "procedural", 12), ("asteroid", "procedural", 11), ("asteroid", "dataset", 13)])
+def test_oracle_captures_debris(domain, asset_source, seed):
+    env = gym.make("DebrisCapture-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("DebrisCapture-v1"), seed)
+    assert result.success_at_end, (domain, asset_source, seed, result.failure)
+    env.close()

@@ -16,7 +16,7 @@ kwargs = { domain = "moon", asset_source = "dataset" }
 
 [[configurations]]
 name = "later"
-env_id = "DebrisCapture-v1"
+env_id = "SolarPanelAssembly-v1"
 episodes = 1
 """
 

@@ -210,7 +210,12 @@ class SpaceManipulationEnv(BaseEnv):
             if current.shape != self._current_action.shape:  # the control mode was switched through the action
                 self._current_action = torch.zeros_like(current)
             self._previous_action, self._current_action = self._current_action, current
+        self._update_task_state()
         return action
+
+    def _update_task_state(self):
+        """Runs once per control step, after the physics (and, on the GPU, after fetching its state): tasks
+        that track history (e.g. how long an object has been held still) update it here."""
 
     def _action_bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
         space = self.agent.single_action_space

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 from mani_skill_space.oracles.base import Oracle, PlanningFailed
+from mani_skill_space.oracles.debris_capture import DebrisCaptureOracle
 from mani_skill_space.oracles.peg_in_hole import PegInHoleOracle
 from mani_skill_space.oracles.sample_collection import SampleCollectionOracle
 
-ORACLES: dict[str, type[Oracle]] = {"SampleCollection-v1": SampleCollectionOracle, "PegInHoleAssembly-v1": PegInHoleOracle}
+ORACLES: dict[str, type[Oracle]] = {
+    "SampleCollection-v1": SampleCollectionOracle,
+    "PegInHoleAssembly-v1": PegInHoleOracle,
+    "DebrisCapture-v1": DebrisCaptureOracle,
+}
 
 
 def oracle_for(env_id: str) -> Oracle:

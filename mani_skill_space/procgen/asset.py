@@ -48,6 +48,9 @@ class Asset:
     """Static and dynamic friction coefficient of the surfaces; None: the scene's default (1.0 here)."""
     frames: Mapping[str, np.ndarray] = field(default_factory=dict)
     info: Mapping[str, Any] = field(default_factory=dict)
+    solid: Optional[trimesh.Trimesh] = None
+    """The watertight solid the mass and inertia come from, where the coloured visual parts overlap; None:
+    the visual mesh itself."""
 
     @property
     def visual_mesh(self) -> trimesh.Trimesh:
@@ -59,12 +62,12 @@ class Asset:
         return np.concatenate([p.mesh.vertices for p in self.collision_parts])
 
     def mass_properties(self) -> tuple[float, np.ndarray, np.ndarray]:
-        """Mass, centre of mass and inertia tensor (about the centre of mass) of the watertight visual solid.
+        """Mass, centre of mass and inertia tensor (about the centre of mass) of the watertight solid.
 
         Overlapping convex collision parts would double-count mass, so dynamic bodies take their inertia
         from the visual solid instead.
         """
-        mesh = self.visual_mesh
+        mesh = self.solid if self.solid is not None else self.visual_mesh
         if not mesh.is_volume:
             raise ValueError(f"{self.name}: visual mesh is not a closed volume; cannot compute its mass")
         props = trimesh.triangles.mass_properties(mesh.triangles, density=self.density)

@@ -35,8 +35,13 @@ def save_asset(asset: Asset, directory: str | Path) -> Path:
         name = f"collision_{i}.obj"
         _write_obj(part.mesh, directory / name)
         collisions.append({"mesh": name, "convex": part.convex})
+    solid = None
+    if asset.solid is not None:
+        solid = "solid.obj"
+        _write_obj(asset.solid, directory / solid)
     manifest = {
         "name": asset.name,
+        "solid": solid,
         "density": asset.density,
         "friction": asset.friction,
         "visual_parts": visuals,
@@ -75,6 +80,7 @@ def load_asset(directory: str | Path) -> Asset:
         friction=manifest.get("friction"),
         frames={k: np.asarray(v) for k, v in manifest.get("frames", {}).items()},
         info=manifest.get("info", {}),
+        solid=_read_obj(directory / manifest["solid"]) if manifest.get("solid") else None,
     )
 
 

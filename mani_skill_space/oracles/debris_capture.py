@@ -1,0 +1,222 @@
+"""Oracle for DebrisCapture-v1: predict the debris' ballistic path and put the open hand on it ahead of the
+debris, fingers facing it, by an arm motion that keeps every link out of the debris' way until it reaches the
+hand; as it comes close, move the hand with it (so the fingers close on an object at
+rest relative to them), close, keep moving with it while braking gently to a stop, and hold still."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+import sapien
+import torch
+
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed
+
+SHOULDER_HEIGHT = 0.333
+"""Height of the Panda's shoulder joint above its base."""
+REACH = (0.4, 0.8)
+"""Distances (m) from the shoulder at which the hand can meet the debris and still move back with it."""
+LOWEST_MEETING_HEIGHT = 0.12
+"""Meet the debris at least this high above the platform or ground (room for the hand below it)."""
+EARLIEST_MEETING = 0.8
+LATEST_MEETING = 8.0
+TIME_STEP = 0.1
+ARRIVAL_MARGIN = 0.6
+"""Seconds the hand should be in place before the debris arrives."""
+FOLLOW_DISTANCE = 0.06
+"""Once the debris' centre is this close (m) to the hand, the hand moves with it."""
+SWEEP_TIME_STEP = 0.1
+HAND_LENGTH = 0.12
+"""Debris farther than its radius plus this (m) from the grasp point cannot touch the hand waiting there."""
+TILTS = tuple(np.radians([0.0, 30.0, 60.0]))
+"""Grasp orientations tried at each meeting point: fingers against the debris' velocity, then tilted toward
+pointing down."""
+MOST_FOLLOW_STEPS = 40
+CLOSED_FOLLOW_STEPS = 6
+CATCH_SPEED = 0.08
+"""How fast (m/s) the debris may close in on the hand while the hand moves with it."""
+CATCH_TIME = 0.15
+CLOSE_RADIUS = 0.012
+"""The fingers close once the debris' centre is this close (m) to the grasp point."""
+BRAKE_STEPS = 12
+HOLD_STEPS = 60
+
+
+def _unit_ball(spacing: float) -> np.ndarray:
+    """Points filling the unit ball on a grid (and its surface), so that no arm link fits between them."""
+    axis = np.arange(-1.0, 1.0 + 1e-9, spacing)
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    inside = grid[np.linalg.norm(grid, axis=1) <= 1.0]
+    sphere = np.random.default_rng(0).normal(size=(200, 3))
+    return np.concatenate([inside, sphere / np.linalg.norm(sphere, axis=1, keepdims=True)])
+
+
+UNIT_BALL = _unit_ball(0.25)
+
+
+class DebrisCaptureOracle(Oracle):
+    def plan(self, env) -> Iterator[np.ndarray]:
+        self.make_solver(env)
+        meeting, arm = self._meeting_point(env)
+        yield from self.joint_move(arm, "meeting")
+        yield from self._wait_for_debris(env)
+        self._grip_orientation = meeting.q
+        yield from self._follow_debris(env, meeting)
+        yield from self._brake(env)
+        yield from self.wait_for_success(HOLD_STEPS)
+
+    def _follow_debris(self, env, meeting: sapien.Pose) -> Iterator[np.ndarray]:
+        """Move with the debris until the fingers have closed on it (for a few steps) or time runs out."""
+        closed_steps = 0
+        for _ in range(MOST_FOLLOW_STEPS):
+            if self.gripper == GRIPPER_CLOSED:
+                closed_steps += 1
+                if closed_steps > CLOSED_FOLLOW_STEPS:
+                    return
+            yield from self.servo(lambda step: self._on_debris(env, meeting), 1, "follow")
+
+    def _on_debris(self, env, meeting: sapien.Pose) -> sapien.Pose:
+        """The hand's next position: moving with the debris, letting it come closer at most CATCH_SPEED (so it
+        glides between the fingers instead of being hit); the fingers close once its centre is between them."""
+        position, velocity = self._debris_state(env)
+        hand = self._tcp_position()
+        gap = position - hand
+        distance = float(np.linalg.norm(gap))
+        if distance < CLOSE_RADIUS or self._touching(env):  # a long body may touch the palm before its centre is in
+            self.gripper = GRIPPER_CLOSED
+        if self.gripper != GRIPPER_CLOSED and self._tilt == 0.0:  # until they close, keep the fingers across it
+            self._grip_orientation = self._across(meeting, self._long_axis(env, 0.0))
+        catch_up = min(distance / CATCH_TIME, CATCH_SPEED) * gap / max(distance, 1e-9)
+        return sapien.Pose(hand + (velocity + catch_up) * env.control_timestep, self._grip_orientation)
+
+    def _across(self, meeting: sapien.Pose, long_axis: np.ndarray) -> np.ndarray:
+        """The meeting orientation turned about its approach axis so the fingers close across ``long_axis``,
+        whichever of the two such closing directions is nearer the hand's present one."""
+        frame = meeting.to_transformation_matrix()
+        pose = _facing(frame[:3, 3], -frame[:3, 2], long_axis)
+        closing = pose.to_transformation_matrix()[:3, 1]
+        if closing @ self.env.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].cpu().numpy() < 0:
+            pose = pose * sapien.Pose(q=[0.0, 0.0, 0.0, 1.0])  # half a turn about the approach axis
+        return pose.q
+
+    def _brake(self, env) -> Iterator[np.ndarray]:
+        """Keep the hand moving with the held debris, slowing linearly to a stop."""
+        _, velocity = self._debris_state(env)
+        position = self._tcp_position()
+        dt = env.control_timestep
+        for step in range(BRAKE_STEPS):
+            position = position + velocity * dt * (1 - (step + 1) / BRAKE_STEPS)
+            yield from self.servo(lambda _: sapien.Pose(position, self._grip_orientation), 1, "brake")
+
+    def _tcp_position(self) -> np.ndarray:
+        return self.env.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
+
+    def _meeting_point(self, env) -> tuple[sapien.Pose, np.ndarray]:
+        """The first point of the predicted path the hand can reach before the debris does, and the arm pose."""
+        position, velocity = self._debris_state(env)
+        gravity = np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)
+        shoulder = self.solver.base_pose.p + np.array([0.0, 0.0, SHOULDER_HEIGHT])
+        start = self.arm_qpos()
+        for t in np.arange(EARLIEST_MEETING, LATEST_MEETING, TIME_STEP):
+            point = position + velocity * t + 0.5 * gravity * t * t
+            if point[2] < LOWEST_MEETING_HEIGHT or not REACH[0] <= np.linalg.norm(point - shoulder) <= REACH[1]:
+                continue
+            for tilt in TILTS:
+                pose = _facing(point, velocity + gravity * t, self._long_axis(env, t), tilt)
+                for arm in self.ik_solutions(pose):
+                    path = self._timed_path(start, arm)
+                    if len(path) * env.control_timestep + ARRIVAL_MARGIN > t or not self.path_is_free(start, arm):
+                        continue
+                    if self._clear_of_debris(env, path, point, t):
+                        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
+                        self._tilt = tilt
+                        return pose, arm
+        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
+        raise PlanningFailed("the debris never passes where the hand can meet it in time")
+
+    def _clear_of_debris(self, env, path: np.ndarray, meeting: np.ndarray, meeting_time: float) -> bool:
+        """Whether the arm, moving along ``path`` and then waiting at its end, stays out of the ball the debris
+        sweeps (tumbling, it may point any way) until it comes within reach of the fingers at ``meeting``."""
+        position, velocity = self._debris_state(env)
+        gravity = np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)
+        radius = self._debris_radius(env)
+        planner = self.solver.planner
+        for t in np.arange(0.0, meeting_time, SWEEP_TIME_STEP):
+            centre = position + velocity * t + 0.5 * gravity * t * t
+            if np.linalg.norm(centre - meeting) < radius + HAND_LENGTH:
+                break
+            qpos = path[min(int(t / env.control_timestep), len(path) - 1)]
+            planner.update_point_cloud(np.concatenate([self.solver.all_collision_pts, centre + radius * UNIT_BALL]))
+            if planner.check_for_env_collision(planner.robot, planner.pad_qpos(qpos), with_point_cloud=True):
+                return False
+        return True
+
+    @staticmethod
+    def _debris_radius(env) -> float:
+        from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
+
+        return float(np.linalg.norm(get_actor_obb(env.debris).primitive.extents)) / 2
+
+    def _wait_for_debris(self, env) -> Iterator[np.ndarray]:
+        """Hold the open hand still until the debris is close."""
+        for _ in range(int(LATEST_MEETING / env.control_timestep)):
+            position, _ = self._debris_state(env)
+            if np.linalg.norm(position - self._tcp_position()) < FOLLOW_DISTANCE or self._touching(env):
+                return
+            yield self.hold_action()
+        raise PlanningFailed("the debris did not arrive")
+
+    @staticmethod
+    def _touching(env) -> bool:
+        """Whether the debris touches the hand or a finger."""
+        agent = env.agent
+        links = (agent.finger1_link, agent.finger2_link, agent.robot.links_map["panda_hand"])
+        return any(float(torch.linalg.norm(env.scene.get_pairwise_contact_forces(link, env.debris)[0])) > 0 for link in links)
+
+    @staticmethod
+    def _long_axis(env, time: float) -> np.ndarray:
+        """The debris' longest axis (its bounding box's) as it will point at ``time``, turning at its present
+        angular velocity."""
+        from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
+
+        box = get_actor_obb(env.debris)
+        axis = np.asarray(box.primitive.transform)[:3, int(np.argmax(box.primitive.extents))]
+        spin = env.debris.angular_velocity[0].cpu().numpy().astype(np.float64) * time
+        return sapien.Pose(q=_axis_angle_quaternion(spin)).to_transformation_matrix()[:3, :3] @ axis
+
+    @staticmethod
+    def _debris_state(env) -> tuple[np.ndarray, np.ndarray]:
+        return env.debris.pose.p[0].cpu().numpy().astype(np.float64), env.debris.linear_velocity[0].cpu().numpy().astype(np.float64)
+
+
+def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt: float = 0.0) -> sapien.Pose:
+    """A grasp pose at ``point`` whose open fingers take the incoming debris between them: pointing against its
+    velocity (``tilt`` 0; closing across the debris' long axis, so a long body lies along the fingers), or
+    tilted by ``tilt`` radians toward pointing down, closing across the path, so that the debris glides in
+    along the channel the two finger pads leave open (the Panda reaches some of these poses much sooner)."""
+    along = velocity / np.linalg.norm(velocity)
+    if tilt == 0.0:
+        approach = -along
+        closing = np.cross(approach, long_axis)
+        if np.linalg.norm(closing) < 0.2:  # the long axis points at the hand: any closing direction will do
+            closing = np.cross(approach, [0.0, 0.0, 1.0])
+    else:
+        down = np.array([0.0, 0.0, -1.0]) + along[2] * along  # straight down, less its part along the path
+        if np.linalg.norm(down) < 0.3:  # falling almost straight down: tilt sideways instead
+            down = np.array([0.0, 1.0, 0.0]) - along[1] * along
+        down /= np.linalg.norm(down)
+        approach = np.cos(tilt) * -along + np.sin(tilt) * down
+        closing = np.cross(approach, along)
+    closing /= np.linalg.norm(closing)
+    frame = np.eye(4)
+    frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    frame[:3, 3] = point
+    return sapien.Pose(frame)
+
+
+def _axis_angle_quaternion(rotation: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(rotation))
+    if angle < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * rotation / angle])

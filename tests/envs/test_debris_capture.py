@@ -1,0 +1,251 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+
+from mani_skill_space.envs import DebrisCaptureEnv, task_class
+from mani_skill_space.envs.debris_capture import CALM_SECONDS, DATASET_DEBRIS
+
+ENV_ID = "DebrisCapture-v1"
+DOMAINS = DebrisCaptureEnv.SUPPORTED_DOMAINS
+SOURCES = DebrisCaptureEnv.SUPPORTED_ASSET_SOURCES
+CLOSE = torch.tensor([[0, 0, 0, 0, 0, 0, -1.0]])
+HOLD = torch.zeros(1, 7)
+
+
+def make(**kwargs):
+    kwargs.setdefault("render_backend", "none")
+    kwargs.setdefault("obs_mode", "state")
+    return gym.make(ENV_ID, **kwargs)
+
+
+def test_registered_with_the_reference_episode_duration():
+    assert task_class(ENV_ID) is DebrisCaptureEnv
+    assert gym.spec(ENV_ID).max_episode_steps == DebrisCaptureEnv.nominal_episode_steps() == 200
+    assert set(DOMAINS) == {"orbit", "asteroid"}
+
+
+@pytest.mark.parametrize("obs_mode", ["state", "rgbd"])
+@pytest.mark.parametrize("asset_source", SOURCES)
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_reset_and_step_in_every_domain_and_asset_source(domain, asset_source, obs_mode):
+    env = make(domain=domain, asset_source=asset_source, obs_mode=obs_mode, render_backend="cpu" if obs_mode != "state" else "none")
+    env.reset(seed=1)
+    for _ in range(3):
+        obs, reward, _, _, info = env.step(env.action_space.sample())
+    assert torch.isfinite(reward).all()
+    assert set(info["reward_terms"]) == set(DebrisCaptureEnv.REWARD_TABLE.names)
+    assert all(torch.isfinite(v).all() for v in info["reward_terms"].values())
+    if obs_mode == "rgbd":
+        for camera in ("base_camera", "wrist_camera"):
+            assert obs["sensor_data"][camera]["rgb"].shape == (1, 64, 64, 3)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(domain="moon"), "valid choices: orbit, asteroid"),
+        (dict(asset_source="cad"), "valid choices: procedural, dataset"),
+        (dict(difficulty=-0.5), "difficulty must be a finite number >= 0"),
+        (dict(difficulty=float("nan")), "difficulty must be a finite number >= 0"),
+    ],
+)
+def test_bad_kwargs(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make(**kwargs)
+
+
+def test_orbit_has_no_gravity_and_the_asteroid_a_little():
+    for domain, gravity in [("orbit", 0.0), ("asteroid", -0.14219)]:
+        env = make(domain=domain)
+        assert env.unwrapped.scene.px.config.gravity.tolist() == pytest.approx([0.0, 0.0, gravity])
+        env.close()
+
+
+def _angular_momentum(actor) -> np.ndarray:
+    """World-frame angular momentum about the centre of mass, from PhysX's body state."""
+    body = actor._bodies[0]
+    rotation = (actor.pose.sp * body.cmass_local_pose).to_transformation_matrix()[:3, :3]
+    inertia = rotation @ np.diag(body.inertia) @ rotation.T
+    return inertia @ actor.angular_velocity[0].numpy().astype(np.float64)
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+def test_untouched_debris_keeps_its_velocity_and_angular_momentum(asset_source):
+    env = make(domain="orbit", asset_source=asset_source)
+    for seed in range(3):
+        env.reset(seed=seed)
+        u = env.unwrapped
+        u.debris.set_pose(sapien.Pose([1.6, 0.6, 1.0], u.debris.pose.sp.q))  # far from anything it could hit
+        velocity = u.debris.linear_velocity[0].numpy().copy()
+        momentum = _angular_momentum(u.debris)
+        assert np.linalg.norm(momentum) > 0
+        start = u.debris.pose.p[0].numpy().copy()
+        for _ in range(19):
+            env.step(HOLD)
+        spin_before = u.debris.angular_velocity[0].numpy().copy()
+        env.step(HOLD)  # 1 s in all
+        np.testing.assert_allclose(u.debris.linear_velocity[0].numpy(), velocity, atol=1e-5)
+        np.testing.assert_allclose(u.debris.pose.p[0].numpy(), start + velocity * 1.0, atol=1e-4)
+        assert np.linalg.norm(_angular_momentum(u.debris) - momentum) < 0.02 * np.linalg.norm(momentum)
+        # the measured velocities (the step's mean) agree with PhysX's of a free body (precessing during the step)
+        np.testing.assert_allclose(u._debris_velocity[0].numpy(), velocity, atol=1e-4)
+        spin_mean = (spin_before + u.debris.angular_velocity[0].numpy()) / 2
+        assert np.linalg.norm(u._debris_spin_velocity[0].numpy() - spin_mean) < 0.02 * np.linalg.norm(spin_mean) + 1e-3
+    env.close()
+
+
+def test_the_arm_base_and_its_mount_do_not_move_when_the_debris_hits_them():
+    env = make(domain="orbit", asset_source="dataset")
+    env.reset(seed=0)
+    u = env.unwrapped
+    base, mount = u.agent.robot.pose.raw_pose.clone(), u.mount_actor.pose.raw_pose.clone()
+    u.debris.set_pose(sapien.Pose([0.45, 0.0, 0.45]))
+    u.debris.set_linear_velocity(torch.tensor([[-1.0, 0.0, 0.0]]))  # straight into the arm
+    generator = torch.Generator().manual_seed(0)
+    for _ in range(40):
+        env.step(torch.rand(1, 7, generator=generator) * 2 - 1)
+    assert torch.linalg.norm(u.debris.pose.p[0] - torch.tensor([0.45, 0.0, 0.45])) > 0.05  # it did move (and hit)
+    torch.testing.assert_close(u.agent.robot.pose.raw_pose, base, rtol=0, atol=0)
+    torch.testing.assert_close(u.mount_actor.pose.raw_pose, mount, rtol=0, atol=0)
+    env.close()
+
+
+def _debris_in_the_hand(env, spin=(0.0, 0.0, 0.0)):
+    """Put the debris, at rest (or turning at ``spin``), between the open fingers."""
+    u = env.unwrapped
+    u.debris.set_pose(sapien.Pose(u.agent.tcp.pose.sp.p, u.agent.tcp.pose.sp.q))
+    u.debris.set_linear_velocity(torch.zeros(1, 3))
+    u.debris.set_angular_velocity(torch.tensor([spin]))
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+def test_success_needs_the_debris_held_still_for_half_a_second(asset_source):
+    env = make(asset_source=asset_source, reward_mode="dense")
+    env.reset(seed=0 if asset_source == "dataset" else 1)  # a 1U CubeSat; a small satellite
+    _debris_in_the_hand(env)
+    successes = []
+    for _ in range(30):
+        _, reward, terminated, _, info = env.step(CLOSE)
+        successes.append(info["success"].item())
+        if successes[-1]:
+            break
+    assert info["is_grasped"].item() and successes[-1]
+    assert terminated.item()
+    # the fingers take a few steps to close; then it must stay calm for CALM_SECONDS
+    assert not any(successes[: int(CALM_SECONDS * env.unwrapped.control_freq)])
+    assert reward.item() == DebrisCaptureEnv.REWARD_TABLE.max_reward == 15.0
+    env.close()
+
+
+def test_debris_floating_still_but_not_held_is_not_success():
+    env = make()
+    env.reset(seed=0)
+    _debris_in_the_hand(env)
+    for _ in range(20):
+        _, _, terminated, _, info = env.step(HOLD)
+    assert not info["is_grasped"].item() and not info["success"].item() and not terminated.item()
+    assert info["calm_time"].item() == 0.0
+    # and the damping terms pay nothing until it is grasped
+    assert info["reward_terms"]["slow_down"].item() == pytest.approx(0.0, abs=1e-6)
+    assert info["reward_terms"]["stop_spin"].item() == pytest.approx(0.0, abs=1e-6)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "position, velocity, lost",
+    [([1.7, 0.0, 0.5], [0.2, 0.0, 0.0], True), ([1.7, 0.0, 0.5], [-0.2, 0.0, 0.0], False), ([1.2, 0.0, 0.5], [0.2, 0.0, 0.0], False)],
+)
+def test_debris_out_of_reach_and_moving_away_ends_the_episode_as_a_failure(position, velocity, lost):
+    env = make()
+    env.reset(seed=0)
+    u = env.unwrapped
+    u.debris.set_pose(sapien.Pose(position))
+    u.debris.set_linear_velocity(torch.tensor([velocity]))
+    env.step(HOLD)  # the first step after a jump measures the jump
+    _, _, terminated, _, info = env.step(HOLD)
+    assert info["fail"].item() == lost and terminated.item() == lost
+    env.close()
+
+
+def test_dense_reward_is_the_sum_of_the_reported_terms_and_normalised_is_in_unit_interval():
+    env = make(reward_mode="dense")
+    env.reset(seed=3)
+    table = DebrisCaptureEnv.REWARD_TABLE
+    for _ in range(10):
+        _, reward, _, _, info = env.step(env.action_space.sample())
+        assert reward.item() == pytest.approx(sum(v.item() for v in info["reward_terms"].values()), abs=1e-4)
+        assert 0.0 <= table.normalize(reward).item() <= 1.0
+    env.close()
+
+
+def test_difficulty_scales_drift_and_tumble():
+    speeds, spins = {}, {}
+    for difficulty in (0.0, 1.0, 2.0):
+        env = make(difficulty=difficulty)
+        env.reset(seed=4)
+        speeds[difficulty] = torch.linalg.norm(env.unwrapped.debris.linear_velocity).item()
+        spins[difficulty] = torch.linalg.norm(env.unwrapped.debris.angular_velocity).item()
+        env.close()
+    assert spins[0.0] == 0.0 and spins[2.0] == pytest.approx(2 * spins[1.0], rel=1e-5)
+    assert speeds[0.0] == pytest.approx(0.4 * speeds[1.0], rel=1e-5) and speeds[2.0] == pytest.approx(1.6 * speeds[1.0], rel=1e-5)
+
+
+def test_same_seed_same_debris_and_initial_state_and_rollout():
+    actions = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (15, 1, 7)), dtype=torch.float32)
+    rollouts = []
+    for _ in range(2):
+        env = make()
+        obs, _ = env.reset(seed=7)
+        trajectory = [obs, env.unwrapped.debris.linear_velocity, env.unwrapped.debris.angular_velocity]
+        for action in actions:
+            obs, reward, *_ = env.step(action)
+            trajectory += [obs, reward]
+        rollouts.append(torch.cat([t.reshape(-1) for t in trajectory]))
+        env.close()
+    torch.testing.assert_close(rollouts[0], rollouts[1], rtol=0, atol=0)
+    env = make()
+    env.reset(seed=8)
+    assert not torch.equal(env.unwrapped.debris.linear_velocity, rollouts[0][obs.shape[-1] : obs.shape[-1] + 3].reshape(1, 3))
+    env.close()
+
+
+def test_dataset_debris_cycles_through_the_cubesats_and_the_peg():
+    env = make(asset_source="dataset")
+    names = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        names.add(env.unwrapped.debris_assets[0].name)
+    assert len(names) == len(DATASET_DEBRIS) == 3
+    env.close()
+
+
+def test_state_observations_include_the_debris_motion():
+    env = make(obs_mode="state_dict")
+    obs, _ = env.reset(seed=0)
+    extra = obs["extra"]
+    for key, size in [("debris_pos_in_tcp", 3), ("debris_rot6d_in_tcp", 6), ("debris_linear_velocity", 3), ("debris_angular_velocity", 3), ("calm_time", 1)]:
+        assert extra[key].shape == (1, size)
+    torch.testing.assert_close(extra["debris_linear_velocity"], env.unwrapped.debris.linear_velocity)
+    env.close()
+
+
+def test_state_round_trip_restores_the_evaluation():
+    env = make()
+    env.reset(seed=0)
+    _debris_in_the_hand(env)
+    for _ in range(8):
+        env.step(CLOSE)
+    state = env.unwrapped.get_state_dict()
+    info = env.unwrapped.evaluate()
+    assert info["calm_time"].item() > 0
+    for _ in range(5):
+        env.step(env.action_space.sample())
+    env.unwrapped.set_state_dict(state)
+    restored = env.unwrapped.evaluate()
+    # (contacts, hence is_grasped, come from the last physics step and are not part of any state)
+    for key in ("calm_time", "debris_speed", "debris_spin"):
+        torch.testing.assert_close(restored[key], info[key])
+    env.close()
