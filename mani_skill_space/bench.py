@@ -26,9 +26,10 @@ from mani_skill_space.procgen.debris import make_debris
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.procgen.rock import make_rock
+from mani_skill_space.procgen.solar_panel import make_panel, make_socket_base, make_solar_layout, make_solar_pegs
 from mani_skill_space.procgen.terrain import make_terrain
 
-REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1", "DebrisCapture-v1": "PickCube-v1"}
+REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1", "DebrisCapture-v1": "PickCube-v1", "SolarPanelAssembly-v1": "PegInsertionSide-v1"}
 """The ManiSkill task each of our envs is compared with."""
 
 
@@ -126,10 +127,16 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
         generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
+    generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
     return generators
+
+
+def _solar_panel_set(seed: int) -> tuple:
+    layout = make_solar_layout(seed)
+    return make_socket_base(layout), make_solar_pegs(layout, seed), make_panel(layout)
 
 
 def bench_assets(args: Args, report: Report) -> None:

@@ -28,7 +28,7 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill_space.envs import TASKS
 from mani_skill_space.envs.base import SpaceManipulationEnv
 
-PLANNED_ENV_IDS = ("SolarPanelAssembly-v1",)
+PLANNED_ENV_IDS: tuple[str, ...] = ()
 """Tasks of the benchmark that this version does not implement yet."""
 
 SUITE_KEYS = {"name", "description", "episodes", "seed_start", "configurations"}

@@ -130,3 +130,20 @@ def test_step_velocities_recover_known_motions_on_8_envs():
 def test_rotation_vector_takes_the_short_way_round():
     turn = torch.tensor([[0.0, 0.0, 1.5 * torch.pi]])  # three quarters of a turn = a quarter turn back
     torch.testing.assert_close(rotation_vector(axis_angle_to_quaternion(turn)), torch.tensor([[0.0, 0.0, -0.5 * torch.pi]]))
+
+
+def test_pose_error_on_eight_envs_with_half_turn_symmetry():
+    from mani_skill_space.geometry import pose_error
+
+    n = 8
+    target = torch.eye(4).repeat(n, 1, 1)
+    target[:, :3, 3] = torch.tensor([0.55, 0.0, 0.28])
+    yaw = torch.linspace(0.0, torch.pi, n)
+    pose = target.clone()
+    pose[:, 0, 0], pose[:, 0, 1], pose[:, 1, 0], pose[:, 1, 1] = torch.cos(yaw), -torch.sin(yaw), torch.sin(yaw), torch.cos(yaw)
+    pose[:, 0, 3] += torch.arange(n) * 0.01
+    distance, angle = pose_error(pose, target)
+    torch.testing.assert_close(distance, torch.arange(n) * 0.01, atol=1e-6, rtol=0)
+    torch.testing.assert_close(angle, yaw, atol=1e-3, rtol=0)
+    _, symmetric = pose_error(pose, target, half_turn_symmetric=True)
+    torch.testing.assert_close(symmetric, torch.minimum(yaw, torch.pi - yaw), atol=1e-3, rtol=0)

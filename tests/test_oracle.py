@@ -50,3 +50,11 @@ def test_oracle_captures_debris(domain, asset_source, seed):
     result = run_episode(env, oracle_for("DebrisCapture-v1"), seed)
     assert result.success_at_end, (domain, asset_source, seed, result.failure)
     env.close()
+
+
+@pytest.mark.parametrize("domain, asset_source, seed", [("moon", "dataset", 3), ("mars", "procedural", 4003)])
+def test_oracle_assembles_the_solar_panel(domain, asset_source, seed):
+    env = gym.make("SolarPanelAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("SolarPanelAssembly-v1"), seed)
+    assert result.success_at_end, (domain, asset_source, seed, result.failure)
+    env.close()

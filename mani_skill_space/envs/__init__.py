@@ -6,11 +6,13 @@ from mani_skill_space.envs.base import SpaceManipulationEnv
 from mani_skill_space.envs.debris_capture import DebrisCaptureEnv
 from mani_skill_space.envs.peg_in_hole_assembly import PegInHoleAssemblyEnv
 from mani_skill_space.envs.sample_collection import SampleCollectionEnv
+from mani_skill_space.envs.solar_panel_assembly import SolarPanelAssemblyEnv
 
 TASKS: dict[str, type[SpaceManipulationEnv]] = {
     "SampleCollection-v1": SampleCollectionEnv,
     "PegInHoleAssembly-v1": PegInHoleAssemblyEnv,
     "DebrisCapture-v1": DebrisCaptureEnv,
+    "SolarPanelAssembly-v1": SolarPanelAssemblyEnv,
 }
 
 
@@ -22,4 +24,4 @@ def task_class(env_id: str) -> type[SpaceManipulationEnv]:
     return TASKS[env_id]
 
 
-__all__ = ["DebrisCaptureEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SpaceManipulationEnv", "TASKS", "task_class"]
+__all__ = ["DebrisCaptureEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SolarPanelAssemblyEnv", "SpaceManipulationEnv", "TASKS", "task_class"]

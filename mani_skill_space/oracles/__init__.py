@@ -6,11 +6,13 @@ from mani_skill_space.oracles.base import Oracle, PlanningFailed
 from mani_skill_space.oracles.debris_capture import DebrisCaptureOracle
 from mani_skill_space.oracles.peg_in_hole import PegInHoleOracle
 from mani_skill_space.oracles.sample_collection import SampleCollectionOracle
+from mani_skill_space.oracles.solar_panel import SolarPanelOracle
 
 ORACLES: dict[str, type[Oracle]] = {
     "SampleCollection-v1": SampleCollectionOracle,
     "PegInHoleAssembly-v1": PegInHoleOracle,
     "DebrisCapture-v1": DebrisCaptureOracle,
+    "SolarPanelAssembly-v1": SolarPanelOracle,
 }
 
 

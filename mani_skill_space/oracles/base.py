@@ -199,6 +199,15 @@ class Oracle(Policy):
                 return
             yield self.hold_action()
 
+    def wait_for_grasp(self, actor, what: str, most_steps: int = 8) -> Iterator[np.ndarray]:
+        """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
+        PlanningFailed if it has not within ``most_steps``."""
+        for _ in range(most_steps):
+            if bool(self.env.is_grasping(actor)[0]):
+                return
+            yield self.hold_action()
+        raise PlanningFailed(f"the grasp missed {what}")
+
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
         self.gripper = state
         yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0))

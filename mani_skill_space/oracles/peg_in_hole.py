@@ -10,7 +10,8 @@ re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop
 
 from __future__ import annotations
 
-from typing import Iterator, Optional
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -41,59 +42,102 @@ INSERT_STEP = 0.0025
 PRESS_DEPTH = 0.003
 """The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
 SETTLE_STEPS = 4
+RELAXED_HEIGHT = 0.0005
+"""Where the tip is held, above the bottom, while the push eases off before letting go."""
 AXIS_KEEPOUT = 0.04
 """The module's surface within this distance (m) of the peg's side, around the hole's axis, is left out of
 the planner's obstacles: the fingers holding the peg come that close to it."""
+KEEPOUT_BELOW_ENTRANCE = 0.01
+"""...down to this far below the entrance (the fingers hold the peg above it)."""
+
+
+@dataclass
+class PegTarget:
+    """One peg and the hole it goes into, as the oracle sees them (world frame, numpy)."""
+
+    peg: Any
+    """The peg's actor (for grasp checks)."""
+    end_frames: Callable[[], np.ndarray]
+    """The peg's insertable ends now, (2, 4, 4) (the second repeats the first if only one)."""
+    end_valid: np.ndarray
+    bottom: np.ndarray
+    """The hole's bottom frame (z out of the hole)."""
+    depth: float
+    symmetry: int
+    radius: float
+    height: float
 
 
 class PegInHoleOracle(Oracle):
+    lift_height = LIFT_HEIGHT
+    """Height (m) of the TCP after lifting the peg, before swinging it over the hole."""
+    relax_steps = 0
+    """Steps spent easing off the push at the end of the insertion (for a peg that will be let go)."""
+
     def plan(self, env) -> Iterator[np.ndarray]:
-        self.make_solver(env, obstacles=self._module_points(env))
-        end = self._end_toward_arm(env)
-        bottom = env._bottom[0].cpu().numpy().astype(np.float64)
-        depth = float(env._depth[0])
-        grasp, twist = self._plan_grasp(env, end, bottom, depth)
+        target = PegTarget(
+            peg=env.peg,
+            end_frames=lambda: env.peg_end_frames()[0].cpu().numpy().astype(np.float64),
+            end_valid=env._peg_end_valid[0].cpu().numpy(),
+            bottom=env._bottom[0].cpu().numpy().astype(np.float64),
+            depth=float(env._depth[0]),
+            symmetry=int(env._symmetry[0]),
+            radius=float(env._peg_radius[0]),
+            height=float(env._peg_height[0]),
+        )
+        module = np.eye(4)
+        module[:3, 3] = env.hole_module.pose.p[0].cpu().numpy()
+        self.make_solver(env, obstacles=outside_keepout(surface_points(env.hole_assets[0], module), target))
+        yield from self.insert(target)
+        yield from self.wait_for_success(20)
+
+    def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
+        """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
+        end = self._end_toward_arm(target)
+        grasp, twist = self._plan_grasp(target, end)
+        bottom, depth = target.bottom, target.depth
 
         yield from self.screw_to(_backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
         yield from self.screw_to(grasp, "grasp", SETTLE_STEPS)
         yield from self.set_gripper(GRIPPER_CLOSED)
-        if not bool(env.evaluate()["is_grasped"][0]):
-            raise PlanningFailed("the grasp missed the peg")
-        yield from self.screw_to(_at_height(self._tcp(), LIFT_HEIGHT), "lift")
+        yield from self.wait_for_grasp(target.peg, "the peg")
+        yield from self.screw_to(_at_height(self._tcp(), self.lift_height), "lift")
 
-        arm = self._line_up(env, end, bottom, depth, twist)
+        arm = self._line_up(target, end, twist)
         yield from self.joint_move(arm, "over the hole")
         for _ in range(REFINE_PASSES + 1):  # re-measure the peg in the hand each time: it may have slipped
-            yield from self.screw_to(self._tcp_for_tip(env, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+            yield from self.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
         start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
         steps = int(np.ceil((start - finish) / INSERT_STEP))
         height = lambda step: max(finish, start - (step + 1) * INSERT_STEP)  # noqa: E731
-        yield from self.servo(lambda step: self._tcp_for_tip(env, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
-        yield from self.wait_for_success(20)
+        yield from self.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+        if self.relax_steps:  # stop pressing, so that the peg rests where it is when let go
+            yield from self.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.relax_steps, "relax")
 
     # ------------------------------------------------------------------ planning
-    def _plan_grasp(self, env, end: int, bottom: np.ndarray, depth: float) -> tuple[sapien.Pose, float]:
-        tip = self._end_frame(env, end)
+    def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
+        bottom, depth = target.bottom, target.depth
+        tip = target.end_frames()[end]
         outward = bottom[:3, 3] - self.solver.base_pose.p
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
         for tilt in GRASP_TILTS:
-            grasp = self._grasp_pose(env, tip, tilt)
+            grasp = self._grasp_pose(target, tip, tilt)
             if not (self.ik_solutions(grasp) and self.ik_solutions(_backed_off(grasp, PRE_GRASP_DISTANCE))):
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
             hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
-            for twist in sorted(_twists(int(env._symmetry[0])), key=score):
+            for twist in sorted(_twists(target.symmetry), key=score):
                 if self._insertion_arm(bottom, depth, twist, tip_in_hand) is not None:
                     return grasp, float(twist)
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
-    def _line_up(self, env, end: int, bottom: np.ndarray, depth: float, twist: float) -> np.ndarray:
+    def _line_up(self, target: PegTarget, end: int, twist: float) -> np.ndarray:
         """An arm configuration for the planned twist, given how the hand really holds the peg now."""
-        tip_in_hand = np.linalg.inv(self._tcp().to_transformation_matrix()) @ self._end_frame(env, end)
-        arm = self._insertion_arm(bottom, depth, twist, tip_in_hand, start=self.arm_qpos())
+        tip_in_hand = np.linalg.inv(self._tcp().to_transformation_matrix()) @ target.end_frames()[end]
+        arm = self._insertion_arm(target.bottom, target.depth, twist, tip_in_hand, start=self.arm_qpos())
         if arm is None:
             raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
         return arm
@@ -109,51 +153,45 @@ class PegInHoleOracle(Oracle):
                 return arm
         return None
 
-    def _grasp_pose(self, env, tip: np.ndarray, tilt: float) -> sapien.Pose:
+    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float) -> sapien.Pose:
         """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip, with the finger pads
         far enough from the tip to stay out of the hole."""
         axis = tip[:3, 2]
-        height, depth = float(env._peg_height[0]), float(env._depth[0])
+        height, depth = target.height, target.depth
         reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
         closing = np.cross(axis, [0.0, 0.0, 1.0])
         closing /= np.linalg.norm(closing)
         upward = np.cross(closing, axis)
         upward *= np.sign(upward[2])
         approach = -np.sin(tilt) * axis - np.cos(tilt) * upward
-        return env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
+        return self.env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
 
-    def _end_toward_arm(self, env) -> int:
+    def _end_toward_arm(self, target: PegTarget) -> int:
         """Of the insertable ends, the one nearest the arm: the hand, tilted toward the tip, then comes from the
         far side of the peg and keeps clear of the rover."""
-        ends = env.peg_end_frames()[0].cpu().numpy()
-        valid = env._peg_end_valid[0].cpu().numpy()
-        distance = [np.linalg.norm(ends[i][:2, 3] - self.solver.base_pose.p[:2]) if valid[i] else np.inf for i in range(len(ends))]
+        ends = target.end_frames()
+        distance = [np.linalg.norm(ends[i][:2, 3] - self.solver.base_pose.p[:2]) if target.end_valid[i] else np.inf for i in range(len(ends))]
         return int(np.argmin(distance))
 
-    @staticmethod
-    def _module_points(env) -> np.ndarray:
-        """The hole module as obstacle points, except around the hole's axis where the peg and fingers go in."""
-        module = np.eye(4)
-        module[:3, 3] = env.hole_module.pose.p[0].cpu().numpy()
-        points = surface_points(env.hole_assets[0], module)
-        bottom = env._bottom[0].cpu().numpy()
-        offset = points - bottom[:3, 3]
-        along = offset @ bottom[:3, 2]
-        lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
-        return points[lateral > float(env._peg_radius[0]) + AXIS_KEEPOUT]
-
     # ------------------------------------------------------------------ measuring
-    def _tcp_for_tip(self, env, end: int, tip_goal: np.ndarray) -> sapien.Pose:
+    def _tcp_for_tip(self, target: PegTarget, end: int, tip_goal: np.ndarray) -> sapien.Pose:
         """The TCP pose that puts the peg's end at ``tip_goal``, given how the hand holds the peg right now."""
-        tip_in_tcp = np.linalg.inv(self._tcp().to_transformation_matrix()) @ self._end_frame(env, end)
+        tip_in_tcp = np.linalg.inv(self._tcp().to_transformation_matrix()) @ target.end_frames()[end]
         return sapien.Pose(tip_goal @ np.linalg.inv(tip_in_tcp))
 
     def _tcp(self) -> sapien.Pose:
         return self.env.agent.tcp.pose.sp
 
-    @staticmethod
-    def _end_frame(env, end: int) -> np.ndarray:
-        return env.peg_end_frames()[0, end].cpu().numpy().astype(np.float64)
+
+def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
+    """Obstacle points except around the hole's axis near its entrance, where the peg and the fingers holding
+    it go in (deeper down, e.g. a post's sides, they stay: the hand must not run into them on its way)."""
+    bottom = target.bottom
+    offset = points - bottom[:3, 3]
+    along = offset @ bottom[:3, 2]
+    lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
+    near_entrance = along > target.depth - KEEPOUT_BELOW_ENTRANCE
+    return points[(lateral > target.radius + AXIS_KEEPOUT) | ~near_entrance]
 
 
 def _twists(order: int) -> np.ndarray:

@@ -40,8 +40,9 @@ ALUMINIUM = (0.72, 0.74, 0.77, 1.0)
 SOLAR_BLUE = (0.1, 0.15, 0.45, 1.0)
 
 
-def make_rover(wheel_sections: int = 20) -> Asset:
-    """The rover: chassis, six wheels on side rails, arm pedestal, base-camera post and the cargo bin.
+def make_rover(wheel_sections: int = 20, cargo_bin: bool = True) -> Asset:
+    """The rover: chassis, six wheels on side rails, arm pedestal, base-camera post and (unless ``cargo_bin`` is
+    False, leaving its deck clear) the cargo bin.
 
     Frames: ``arm_mount`` (arm base), ``bin`` (centre of the bin's inner floor), ``base_camera`` (a look-at
     pose, SAPIEN camera convention: x forward, z up).
@@ -67,8 +68,8 @@ def make_rover(wheel_sections: int = 20) -> Asset:
     parts.append((box_mesh((0.012, 0.012, 0.15), (-0.87, 0.24, DECK_HEIGHT + 0.25)), DARK, 0.6, 0.2))
     parts.append((cylinder_mesh(0.06, 0.01, wheel_sections, (-0.87, 0.24, DECK_HEIGHT + 0.41)), WHITE, 0.5, 0.1))
 
-    for mesh in _bin_meshes():
-        parts.append((mesh, ALUMINIUM, 0.35, 0.7))
+    if cargo_bin:
+        parts += [(mesh, ALUMINIUM, 0.35, 0.7) for mesh in _bin_meshes()]
 
     bin_floor = (BIN_CENTRE_XY[0], BIN_CENTRE_XY[1], DECK_HEIGHT + BIN_WALL)
     return Asset(

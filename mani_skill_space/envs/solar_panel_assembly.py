@@ -1,0 +1,359 @@
+from typing import Any, Optional
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.pose import Pose
+
+from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, build_samples, turned_about_z
+from mani_skill_space.envs.building import build_actor_per_env
+from mani_skill_space.geometry import insertion_measures, pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
+from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE
+from mani_skill_space.procgen.solar_panel import (
+    LONG_SOCKETS,
+    RECEPTACLE_DEPTH,
+    SEAT_HEIGHT,
+    SOCKET_OFFSETS,
+    dataset_layout,
+    make_panel,
+    make_socket_base,
+    make_solar_layout,
+    make_solar_pegs,
+)
+from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
+
+PANEL_TARGET_XY = (0.55, 0.0)
+"""The panel's target centre (the reference's): the sockets sit around it."""
+PANEL_START_XY = (-0.34, 0.0)
+"""The panel lies on the rover's deck (or the station's platform) behind the arm, its long side across the
+deck (this task's rover carries no cargo bin)."""
+PANEL_START_JITTER = (0.01, 0.02, np.pi / 36)
+PANEL_DROP_CLEARANCE = 0.001
+PEG_REST_XY = ((0.34, 0.36), (0.34, -0.36), (0.34, 0.05), (0.34, -0.05))
+"""Where each socket's peg lies (socket order: long, long, short, short): in front of the arm, the long pegs
+outside the short ones."""
+PEG_JITTER = 0.01
+PEG_HEADING_JITTER = np.pi / 16
+PEG_DROP_CLEARANCE = 0.0005
+INSERTED_FRACTION = 0.9
+ALIGNMENT_TOLERANCE = np.radians(5.0)
+SEAT_DISTANCE_TOLERANCE = 0.01
+SEAT_ANGLE_TOLERANCE = np.radians(5.0)
+PEG_LIFT_BAND = (0.05, 0.55)
+PANEL_LIFT_BAND = (0.03, 0.5)
+SOCKET_COUNT = len(SOCKET_OFFSETS)
+
+PEG_TERMS = (
+    RewardTerm("peg_reach", 1.0, sigma=0.25),
+    RewardTerm("peg_grasp", 4.0),
+    RewardTerm("peg_lift", 8.0, sigma=0.05),
+    RewardTerm("peg_align_axis", 8.0, sigma=0.5),
+    RewardTerm("peg_align_twist", 4.0, sigma=0.2),
+    RewardTerm("peg_entrance", 16.0, sigma=0.05),
+    RewardTerm("peg_bottom", 128.0, sigma=0.005),
+)
+"""Peg-in-Hole's terms, for the peg nearest to going in."""
+PEG_STAGE_VALUE = sum(t.weight for t in PEG_TERMS)
+REWARD_TABLE = RewardTable(
+    (
+        RewardTerm("pegs_inserted", SOCKET_COUNT * PEG_STAGE_VALUE),
+        *PEG_TERMS,
+        RewardTerm("panel_reach", 4.0, sigma=0.25),
+        RewardTerm("panel_grasp", 8.0),
+        RewardTerm("panel_lift", 16.0, sigma=0.05),
+        RewardTerm("panel_place", 512.0, sigma=0.05),
+        RewardTerm("panel_orient", 64.0, sigma=0.1),
+        *PENALTY_TERMS,
+    )
+)
+
+
+@register_env("SolarPanelAssembly-v1", max_episode_steps=1000)
+class SolarPanelAssemblyEnv(SpaceManipulationEnv):
+    """
+    **Task Description:**
+    Insert four pegs lying in front of the arm into four sockets (two long pegs in the nearer sockets, two short
+    ones in the farther), then take the solar panel from behind the arm and lower it onto the four pegs: its
+    receptacles slide over the pegs' tops and its plate rests on them. On the Moon, Mars and Earth the arm
+    rides the rover (the panel lies on its deck) and the sockets stand on the ground; in orbit everything sits on
+    a station's work platform and nothing falls. 50 s episodes: 1000 control steps at 20 Hz.
+
+    **Randomizations:**
+    - the assets (during reconfiguration, one consistent set per parallel env): `asset_source="dataset"` gives
+      the reference's 20 x 20 mm profile pegs (0.1 and 0.2 m), 22 x 22 mm sockets 20 mm deep on 50 x 50 mm
+      posts and the reference panel; `asset_source="procedural"` draws one profile (a 3-8 sided polygon,
+      radius 10-16 mm, squashed by 0.6-1) for all four pegs, short pegs 0.09-0.12 m (long ones 0.1 m
+      longer), sockets 20-30 mm deep with `clearance` (default 1 mm), and the panel's size (0.9-1.1x per side,
+      the sockets and receptacles moving with it)
+    - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg;
+      the panel within 1 cm / 2 cm / 5 deg of its place on the deck
+    - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
+
+    **Success Conditions:**
+    - every socket holds a peg of its length inserted as in Peg-in-Hole (at least 90% of the depth, axes within
+      5 deg)
+    - the panel's seat (its plate's underside centre) is within 1 cm and 5 deg of its target, on the pegs'
+      tops (either way round: the panel is symmetric under a half turn)
+    - the panel is released
+
+    **Reward:** staged, so that progress is monotone: 169 per filled socket (`pegs_inserted`), plus
+    Peg-in-Hole's dense terms (reach 1, grasp 4, lift 8, axis 8, twist 4, entrance 16, bottom 128, each below
+    its stage's 169) for the unplaced peg furthest along; once all four are in, the panel's terms (reference
+    weights: reach 4/0.25, grasp 8, lift 16/0.05, place 512/0.05, and orientation 64/0.1 rad). A grasp or
+    lift counts as done once the panel is seated, so releasing it loses nothing. `info["stage"]` counts
+    completed stages: 0-4 sockets filled, then panel grasped, lifted, seated, released (8 = success).
+    Success gives the maximum (1360); `normalized_dense` maps [-1.5, 1360] onto [0, 1].
+    """
+
+    SUPPORTED_DOMAINS = ("moon", "mars", "orbit", "earth")
+    DEFAULT_DOMAIN = "moon"
+    EPISODE_SECONDS = 50.0
+    REWARD_TABLE = REWARD_TABLE
+
+    def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
+        if clearance is not None and (asset_source or self.DEFAULT_ASSET_SOURCE) == "dataset":
+            raise ValueError("clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
+        self.clearance = DEFAULT_CLEARANCE if clearance is None else float(clearance)
+        if self.clearance <= 0:
+            raise ValueError(f"clearance must be positive (metres), got {clearance}")
+        super().__init__(*args, asset_source=asset_source, **kwargs)
+
+    def _make_mount(self):
+        return make_station() if self.domain.ground_texture is None else make_rover(cargo_bin=False)
+
+    @property
+    def deck_height(self) -> float:
+        """Height of the surface the panel starts on."""
+        return 0.0 if self.domain.ground_texture is None else DECK_HEIGHT
+
+    def _load_scene(self, options: dict):
+        self._load_domain_scene()
+        seeds = self._asset_seeds()
+        if self.asset_source == "procedural":
+            layouts = [make_solar_layout(seed, self.clearance) for seed in seeds]
+            pegs = [make_solar_pegs(layout, seed) for layout, seed in zip(layouts, seeds)]
+        else:
+            long, short = load_dataset_object("profile_peg_long"), load_dataset_object("profile_peg_short")
+            layouts = [_DATASET_LAYOUT] * self.num_envs
+            pegs = [[long if i in LONG_SOCKETS else short for i in range(SOCKET_COUNT)]] * self.num_envs
+        bases = [make_socket_base(layout) for layout in layouts]
+        panels = [make_panel(layout) for layout in layouts]
+        target = sapien.Pose(p=[*PANEL_TARGET_XY, 0.0])
+        self.socket_base = build_actor_per_env(self.scene, bases, "socket_base", body_type="static", initial_pose=target)
+        self.socket_assets = bases
+        self.peg_assets = pegs
+        self.pegs = [build_samples(self, [p[i] for p in pegs], f"peg_{i}") for i in range(SOCKET_COUNT)]
+        self.panel = build_samples(self, panels, "panel")
+        self.panel_assets = panels
+        self._store_task_geometry(pegs, bases, panels)
+
+    def _store_task_geometry(self, pegs, bases, panels):
+        device = self.device
+        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)  # noqa: E731
+        origin = np.eye(4)
+        origin[:2, 3] = PANEL_TARGET_XY
+        self._entrance = as_tensor([[origin @ b.frames[f"entrance_{i}"] for i in range(SOCKET_COUNT)] for b in bases])
+        self._bottom = as_tensor([[origin @ b.frames[f"bottom_{i}"] for i in range(SOCKET_COUNT)] for b in bases])
+        self._depth = as_tensor([b.info["depth"] for b in bases])
+        self._symmetry = torch.as_tensor([b.info["symmetry_order"] for b in bases], device=device)
+        self._peg_radius = as_tensor([[p.info["radius"] for p in env_pegs] for env_pegs in pegs])
+        self._peg_height = as_tensor([[p.info["height"] for p in env_pegs] for env_pegs in pegs])
+        self._peg_ends = as_tensor([[[p.frames["end_0"], p.frames.get("end_1", p.frames["end_0"])] for p in env_pegs] for env_pegs in pegs])
+        self._peg_end_valid = torch.as_tensor([[[True, "end_1" in p.frames] for p in env_pegs] for env_pegs in pegs], device=device)
+        self._seat_in_panel = as_tensor([p.frames["seat"] for p in panels])
+        self._handle_in_panel = as_tensor([p.frames["handle"] for p in panels])
+        target = np.eye(4)
+        target[:3, 3] = (*PANEL_TARGET_XY, SEAT_HEIGHT)
+        self._panel_target = as_tensor([target] * self.num_envs)
+        self._peg_placements = [RestingPlacement([p[i] for p in pegs], device, exclude_axis=np.array([0.0, 0.0, 1.0])) for i in range(SOCKET_COUNT)]
+        self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
+        # the sockets each peg may fill: those of its length
+        self._fits = self._socket_class[:, None] == self._socket_class[None, :]
+
+    def _after_reconfigure(self, options: dict):
+        super()._after_reconfigure(options)
+        self._peg_start_height = torch.zeros((self.num_envs, SOCKET_COUNT), device=self.device)
+        self._panel_start_height = torch.zeros(self.num_envs, device=self.device)
+
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        with torch.device(self.device):
+            b = len(env_idx)
+            rng = self._batched_episode_rng[env_idx]
+            self._initialize_agent(env_idx)
+            for i, (peg, placement) in enumerate(zip(self.pegs, self._peg_placements)):
+                resting = placement.face_down(env_idx, rng.uniform(0.0, 1.0))
+                axis = quaternion_to_matrix(resting)[:, :, 2]
+                heading = torch.as_tensor(rng.uniform(-PEG_HEADING_JITTER, PEG_HEADING_JITTER), dtype=torch.float32)
+                quat = turned_about_z(resting, heading - torch.atan2(axis[:, 1], axis[:, 0]))
+                position = torch.zeros((b, 3))
+                position[:, :2] = torch.tensor(PEG_REST_XY[i]) + torch.as_tensor(rng.uniform(-PEG_JITTER, PEG_JITTER, size=(2,)), dtype=torch.float32)
+                position[:, 2] = placement.height_on_ground(env_idx, quat, PEG_DROP_CLEARANCE)
+                peg.set_pose(Pose.create_from_pq(position, quat))
+                self._peg_start_height[env_idx, i] = position[:, 2]
+            jitter = torch.as_tensor(rng.uniform(-1.0, 1.0, size=(3,)), dtype=torch.float32) * torch.tensor(PANEL_START_JITTER)
+            yaw = jitter[:, 2]
+            seat = torch.zeros((b, 3))
+            seat[:, :2] = torch.tensor(PANEL_START_XY) + jitter[:, :2]
+            seat[:, 2] = self.deck_height + RECEPTACLE_DEPTH + PANEL_DROP_CLEARANCE
+            quat = torch.stack([torch.cos(yaw / 2), torch.zeros(b), torch.zeros(b), torch.sin(yaw / 2)], dim=-1)
+            # the panel's origin is its centre of mass: place it so that its seat lands at `seat`
+            seat_offset = self._seat_in_panel[env_idx, :3, 3]
+            position = seat - (quaternion_to_matrix(quat) @ seat_offset.unsqueeze(-1)).squeeze(-1)
+            self.panel.set_pose(Pose.create_from_pq(position, quat))
+            self._panel_start_height[env_idx] = seat[:, 2]
+
+    # ------------------------------------------------------------------ measures
+    def peg_end_frames(self) -> torch.Tensor:
+        """World poses (n, 4 pegs, 2 ends, 4, 4) of the pegs' insertable ends (the second repeats the first if only one)."""
+        poses = torch.stack([pose_matrix(peg.pose.p, peg.pose.q) for peg in self.pegs], dim=1)
+        return poses.unsqueeze(2) @ self._peg_ends
+
+    def panel_seat(self) -> torch.Tensor:
+        pose = self.panel.pose
+        return pose_matrix(pose.p, pose.q) @ self._seat_in_panel
+
+    def panel_handle(self) -> torch.Tensor:
+        pose = self.panel.pose
+        return pose_matrix(pose.p, pose.q) @ self._handle_in_panel
+
+    def _peg_socket_measures(self) -> dict[str, torch.Tensor]:
+        """Peg-in-Hole's measures for every (peg, socket) pair, each (n, 4 pegs, 4 sockets)."""
+        n, count = self.num_envs, SOCKET_COUNT
+        ends = self.peg_end_frames()[:, :, None].expand(n, count, count, 2, 4, 4)
+        valid = self._peg_end_valid[:, :, None].expand(n, count, count, 2)
+        entrance = self._entrance[:, None].expand(n, count, count, 4, 4)
+        bottom = self._bottom[:, None].expand(n, count, count, 4, 4)
+        depth = self._depth[:, None, None].expand(n, count, count)
+        symmetry = self._symmetry[:, None, None].expand(n, count, count)
+        flat = insertion_measures(
+            ends.reshape(-1, 2, 4, 4), valid.reshape(-1, 2), entrance.reshape(-1, 4, 4), bottom.reshape(-1, 4, 4), depth.reshape(-1), symmetry.reshape(-1)
+        )
+        return {k: v.reshape(n, count, count) for k, v in flat.items()}
+
+    def evaluate(self):
+        measures = self._peg_socket_measures()
+        radius = self._peg_radius[:, :, None]
+        in_socket = (
+            (measures["inserted_fraction"] >= INSERTED_FRACTION)
+            & (measures["lateral_offset"] <= radius)
+            & (measures["axis_angle"] <= ALIGNMENT_TOLERANCE)
+            & self._fits
+        )
+        socket_filled = in_socket.any(dim=1)
+        sockets_filled = socket_filled.sum(dim=1)
+        all_filled = sockets_filled == SOCKET_COUNT
+        seat_distance, seat_angle = pose_error(self.panel_seat(), self._panel_target, half_turn_symmetric=True)
+        panel_seated = (seat_distance <= SEAT_DISTANCE_TOLERANCE) & (seat_angle <= SEAT_ANGLE_TOLERANCE)
+        panel_grasped = self.is_grasping(self.panel)
+        panel_lift = self.panel_seat()[:, 2, 3] - self._panel_start_height
+        panel_lifted = panel_lift >= PANEL_LIFT_BAND[0]
+        success = all_filled & panel_seated & ~panel_grasped
+        panel_stages = (panel_grasped | panel_seated).int() + (panel_lifted | panel_seated).int() + panel_seated.int() + success.int()
+        return dict(
+            success=success,
+            stage=sockets_filled + torch.where(all_filled, panel_stages, torch.zeros_like(panel_stages)),
+            socket_filled=socket_filled,
+            peg_inserted=in_socket.any(dim=2),
+            sockets_filled=sockets_filled,
+            panel_seated=panel_seated,
+            panel_grasped=panel_grasped,
+            panel_lift=panel_lift,
+            seat_distance=seat_distance,
+            seat_angle=seat_angle,
+            **{f"pair_{k}": v for k, v in measures.items()},
+        )
+
+    def target_sockets(self, info: dict) -> torch.Tensor:
+        """(n, 4) the socket each peg should go to: its own if still empty, else the other of its length."""
+        own = torch.arange(SOCKET_COUNT, device=self.device).expand(self.num_envs, SOCKET_COUNT)
+        partner = torch.tensor([1, 0, 3, 2], device=self.device).expand(self.num_envs, SOCKET_COUNT)
+        own_filled = info["socket_filled"].gather(1, own)
+        return torch.where(own_filled, partner, own)
+
+    # ------------------------------------------------------------------ observations
+    def _get_obs_extra(self, info: dict):
+        tcp_position, tcp_rotation = self.tcp_frame()
+        obs = self._shared_obs_extra(tcp_position, tcp_rotation)
+        obs["panel_grasped"] = info["panel_grasped"].float().unsqueeze(-1)
+        obs["socket_filled"] = info["socket_filled"].float()
+        if self.obs_mode_struct.use_state:
+            n = self.num_envs
+            pegs = torch.stack([peg.pose.raw_pose for peg in self.pegs], dim=1)
+            peg_position, peg_rotation = relative_pose(
+                tcp_position[:, None], tcp_rotation[:, None], pegs[..., :3], rotation_matrix(pegs[..., 3:])
+            )
+            entrance_position, _ = relative_pose(tcp_position[:, None], tcp_rotation[:, None], self._entrance[..., :3, 3], self._entrance[..., :3, :3])
+            handle = self.panel_handle()
+            handle_position, handle_rotation = relative_pose(tcp_position, tcp_rotation, handle[:, :3, 3], handle[:, :3, :3])
+            seat = self.panel_seat()
+            target_position, target_rotation = relative_pose(seat[:, :3, 3], seat[:, :3, :3], self._panel_target[:, :3, 3], self._panel_target[:, :3, :3])
+            obs.update(
+                pegs_pos_in_tcp=peg_position.reshape(n, -1),
+                pegs_rot6d_in_tcp=rotation_6d(peg_rotation).reshape(n, -1),
+                sockets_pos_in_tcp=entrance_position.reshape(n, -1),
+                peg_inserted=info["peg_inserted"].float(),
+                socket_depth=self._depth.unsqueeze(-1),
+                symmetry_order=self._symmetry.float().unsqueeze(-1),
+                handle_pos_in_tcp=handle_position,
+                handle_rot6d_in_tcp=rotation_6d(handle_rotation),
+                target_pos_in_seat=target_position,
+                target_rot6d_in_seat=rotation_6d(target_rotation),
+            )
+        return obs
+
+    # ------------------------------------------------------------------ reward
+    def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
+        all_filled = info["sockets_filled"] == SOCKET_COUNT
+        peg = self._peg_inputs(info, all_filled)
+        tcp = self.agent.tcp.pose.p
+        panel_seated = info["panel_seated"]
+        far = torch.full_like(info["seat_distance"], float("inf"))
+        gate = lambda value: torch.where(all_filled, value, far)  # noqa: E731
+        return dict(
+            pegs_inserted=info["sockets_filled"].float() / SOCKET_COUNT,
+            **peg,
+            panel_reach=gate(torch.linalg.norm(tcp - self.panel_handle()[:, :3, 3], dim=-1)),
+            panel_grasp=(all_filled & (info["panel_grasped"] | panel_seated)).float(),
+            panel_lift=gate(torch.where(panel_seated, torch.zeros_like(far), band_distance(info["panel_lift"], *PANEL_LIFT_BAND))),
+            panel_place=gate(info["seat_distance"]),
+            panel_orient=gate(info["seat_angle"]),
+        )
+
+    def _peg_inputs(self, info: dict, all_filled: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Peg-in-Hole's term inputs for the not-yet-inserted peg whose terms add up to the most."""
+        n = self.num_envs
+        rows = torch.arange(n, device=self.device)[:, None]
+        target = self.target_sockets(info)
+        pair = lambda key: info[f"pair_{key}"][rows, torch.arange(SOCKET_COUNT, device=self.device)[None], target]  # noqa: E731
+        positions = torch.stack([peg.pose.p for peg in self.pegs], dim=1)
+        grasped = torch.stack([self.is_grasping(peg) for peg in self.pegs], dim=1)
+        inputs = dict(
+            peg_reach=torch.linalg.norm(self.agent.tcp.pose.p[:, None] - positions, dim=-1),
+            peg_grasp=grasped.float(),
+            peg_lift=band_distance(positions[..., 2] - self._peg_start_height, *PEG_LIFT_BAND),
+            peg_align_axis=1.0 - torch.cos(pair("axis_angle")),
+            peg_align_twist=pair("twist_error"),
+            peg_entrance=pair("tip_to_entrance"),
+            peg_bottom=pair("tip_to_bottom"),
+        )
+        progress = sum(term(inputs[term.name]) for term in PEG_TERMS)
+        progress = progress.masked_fill(info["peg_inserted"], -1.0)
+        best = progress.argmax(dim=1)
+        chosen = {name: value[rows[:, 0], best] for name, value in inputs.items()}
+        # once all four are in, the peg terms rest at zero
+        off = {"peg_grasp": torch.zeros(n, device=self.device)}
+        return {name: torch.where(all_filled, off.get(name, torch.full_like(value, float("inf"))), value) for name, value in chosen.items()}
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
+
+
+_DATASET_LAYOUT = dataset_layout(short_length=0.1, width=0.02, clearance=0.001, depth=0.02)
+"""The reference: 100 and 200 mm profile pegs 20 mm square, sockets 22 mm square and 20 mm deep."""

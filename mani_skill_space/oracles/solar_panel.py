@@ -1,0 +1,148 @@
+"""Oracle for SolarPanelAssembly-v1.
+
+Chains the Peg-in-Hole oracle four times (the farther, short sockets first, so that the arm never reaches
+over an inserted peg to get to a socket), letting go of each peg and backing away from it before the next.
+Then it takes the panel's grasp bar from above, lifts the panel straight up, swings it over the target with
+its receptacles above the pegs' tops, lowers it onto them (re-measuring the panel in the hand on the way, as
+for a peg) and lets go.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+import sapien
+
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, PlanningFailed, surface_points
+from mani_skill_space.oracles.peg_in_hole import SETTLE_STEPS, PegInHoleOracle, PegTarget, _backed_off, outside_keepout
+
+INSERTION_ORDER = (2, 3, 0, 1)
+"""Sockets in the order they are filled: the farther (short) ones first."""
+RETREAT_DISTANCE = 0.2
+"""After letting go of a peg (or the panel) the hand goes straight up this far (backing out along a tilted
+approach would drag a long peg over), well clear of the pegs' tops before it moves sideways: the planner's
+point-cloud checks miss the open fingers brushing a thin peg's top."""
+PEG_LIFT_HEIGHT = 0.45
+"""The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
+already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
+STILL_IN_FRACTION = 0.8
+PATH_CHECK_STEP = 0.02
+PANEL_PRE_GRASP = 0.1
+PANEL_LIFT = 0.3
+"""How far (m) the panel goes straight up off the deck before swinging round."""
+PLACE_GAP = 0.05
+"""The panel is lined up this far above its seat (its receptacles clear of the pegs' tops) before going down."""
+PLACE_STEP = 0.004
+PLACE_PRESS = 0.004
+
+
+class SolarPanelOracle(PegInHoleOracle):
+    lift_height = PEG_LIFT_HEIGHT
+    relax_steps = 6
+    """In orbit a peg let go while pressed into its socket springs back out of it."""
+
+    def plan(self, env) -> Iterator[np.ndarray]:
+        for socket in INSERTION_ORDER:
+            target = self._peg_target(env, socket)
+            self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket, target=target))
+            yield from self.insert(target)
+            yield from self.set_gripper(GRIPPER_OPEN)
+            yield from self.screw_to(_raised(self._tcp(), RETREAT_DISTANCE), "retreat")
+            # let go, a peg may lean in its socket's clearance (or, in orbit, drift to a lean): the panel's
+            # funnels right it; only a peg that has come out is a failure
+            if float(env.evaluate()["pair_inserted_fraction"][0, socket, socket]) < STILL_IN_FRACTION:
+                raise PlanningFailed(f"peg {socket} did not stay in its socket")
+        self.make_solver(env, obstacles=self._obstacles(env))
+        yield from self.place_panel(env)
+        yield from self.wait_for_success(20)
+
+    def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
+        """Checked every PATH_CHECK_STEP radians at least: inserted pegs are thin and stand up high, and a check
+        at 20 points of a long swing can step over one."""
+        steps = int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / PATH_CHECK_STEP))
+        return super().path_is_free(start, goal, max(samples, steps + 1))
+
+    def _peg_target(self, env, socket: int) -> PegTarget:
+        return PegTarget(
+            peg=env.pegs[socket],
+            end_frames=lambda: env.peg_end_frames()[0, socket].cpu().numpy().astype(np.float64),
+            end_valid=env._peg_end_valid[0, socket].cpu().numpy(),
+            bottom=env._bottom[0, socket].cpu().numpy().astype(np.float64),
+            depth=float(env._depth[0]),
+            symmetry=int(env._symmetry[0]),
+            radius=float(env._peg_radius[0, socket]),
+            height=float(env._peg_height[0, socket]),
+        )
+
+    def _obstacles(self, env, exclude_peg: int = -1, target: PegTarget = None) -> np.ndarray:
+        """The socket posts (less the keep-out around the target's axis), the other pegs where they are now and
+        the panel where it is now, as the planner's obstacle points."""
+        base = np.eye(4)
+        base[:3, 3] = env.socket_base.pose.p[0].cpu().numpy()
+        points = [surface_points(env.socket_assets[0], base)]
+        if target is not None:
+            points[0] = outside_keepout(points[0], target)
+        for i, peg in enumerate(env.pegs):
+            if i != exclude_peg:
+                points.append(surface_points(env.peg_assets[0][i], peg.pose.sp.to_transformation_matrix()))
+        if exclude_peg >= 0:  # while the pegs go in, the panel is still on the deck
+            points.append(surface_points(env.panel_assets[0], env.panel.pose.sp.to_transformation_matrix()))
+        return np.concatenate(points)
+
+    # ------------------------------------------------------------------ panel
+    def place_panel(self, env) -> Iterator[np.ndarray]:
+        grasp = self._panel_grasp(env)
+        yield from self.screw_to(_backed_off(grasp, PANEL_PRE_GRASP), "panel pre-grasp")
+        yield from self.screw_to(grasp, "panel grasp", SETTLE_STEPS)
+        yield from self.set_gripper(GRIPPER_CLOSED)
+        yield from self.wait_for_grasp(env.panel, "the panel's bar")
+        yield from self.screw_to(_raised(self._tcp(), PANEL_LIFT), "panel lift")
+
+        arm = self._over_target(env)
+        yield from self.joint_move(arm, "over the target")
+        for _ in range(2):
+            yield from self.screw_to(self._tcp_for_seat(env, PLACE_GAP), "panel line-up", SETTLE_STEPS)
+        steps = int(np.ceil((PLACE_GAP + PLACE_PRESS) / PLACE_STEP))
+        height = lambda step: max(-PLACE_PRESS, PLACE_GAP - (step + 1) * PLACE_STEP)  # noqa: E731
+        yield from self.servo(lambda step: self._tcp_for_seat(env, height(step)), steps + SETTLE_STEPS, "lower the panel")
+        yield from self.set_gripper(GRIPPER_OPEN)
+        yield from self.screw_to(_raised(self._tcp(), RETREAT_DISTANCE), "retreat")
+
+    def _panel_grasp(self, env) -> sapien.Pose:
+        """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches."""
+        handle = env.panel_handle()[0].cpu().numpy().astype(np.float64)
+        for sign in (1.0, -1.0):
+            pose = env.agent.build_grasp_pose(np.array([0.0, 0.0, -1.0]), sign * handle[:3, 0], handle[:3, 3])
+            if self.ik_solutions(pose) and self.ik_solutions(_backed_off(pose, PANEL_PRE_GRASP)):
+                return pose
+        raise PlanningFailed("the arm cannot reach down to the panel's bar")
+
+    def _over_target(self, env) -> np.ndarray:
+        """An arm configuration holding the panel PLACE_GAP above its seat (either way round), reached by a
+        straight joint move."""
+        start = self.arm_qpos()
+        for half_turns in (0, 1):
+            for arm in self.ik_solutions(self._tcp_for_seat(env, PLACE_GAP, half_turns)):
+                if self.path_is_free(start, arm):
+                    return arm
+        raise PlanningFailed("no arm configuration holds the panel over its target")
+
+    def _tcp_for_seat(self, env, height: float, half_turns: int = None) -> sapien.Pose:
+        """The TCP pose that puts the panel's seat ``height`` above its target, given how the hand holds the panel
+        now; the target turned by the half turn nearer the panel's heading unless ``half_turns`` says."""
+        seat = env.panel_seat()[0].cpu().numpy().astype(np.float64)
+        target = env._panel_target[0].cpu().numpy().astype(np.float64)
+        if half_turns is None:
+            half_turns = int(seat[:3, 0] @ target[:3, 0] < 0)
+        if half_turns:
+            target = target @ np.diag([-1.0, -1.0, 1.0, 1.0])
+        goal = target.copy()
+        goal[2, 3] += height
+        seat_in_tcp = np.linalg.inv(self._tcp().to_transformation_matrix()) @ seat
+        return sapien.Pose(goal @ np.linalg.inv(seat_in_tcp))
+
+
+def _raised(pose: sapien.Pose, height: float) -> sapien.Pose:
+    """``pose`` moved straight up by ``height`` (straight out of a vertical socket, whatever the hand's tilt)."""
+    return sapien.Pose(pose.p + np.array([0.0, 0.0, height]), pose.q)

@@ -1,0 +1,230 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+
+from mani_skill_space.envs import SolarPanelAssemblyEnv, task_class
+from mani_skill_space.envs.solar_panel_assembly import PANEL_START_XY, PEG_REST_XY, REWARD_TABLE
+
+ENV_ID = "SolarPanelAssembly-v1"
+DOMAINS = SolarPanelAssemblyEnv.SUPPORTED_DOMAINS
+SOURCES = SolarPanelAssemblyEnv.SUPPORTED_ASSET_SOURCES
+
+
+def make(**kwargs):
+    kwargs.setdefault("render_backend", "none")
+    kwargs.setdefault("obs_mode", "state")
+    return gym.make(ENV_ID, **kwargs)
+
+
+def test_registered_with_the_reference_episode_duration():
+    assert task_class(ENV_ID) is SolarPanelAssemblyEnv
+    assert gym.spec(ENV_ID).max_episode_steps == SolarPanelAssemblyEnv.nominal_episode_steps() == 1000
+    assert set(DOMAINS) == {"moon", "mars", "orbit", "earth"}
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_reset_and_step_in_every_domain_and_asset_source(domain, asset_source):
+    env = make(domain=domain, asset_source=asset_source)
+    env.reset(seed=1)
+    for _ in range(3):
+        obs, reward, _, _, info = env.step(env.action_space.sample())
+    assert torch.isfinite(reward).all() and torch.isfinite(obs).all()
+    assert set(info["reward_terms"]) == set(REWARD_TABLE.names)
+    assert all(torch.isfinite(v).all() for v in info["reward_terms"].values())
+    assert info["stage"].item() == 0
+    env.close()
+
+
+def test_rgbd_cameras():
+    env = make(obs_mode="rgbd", render_backend="cpu")
+    obs, _ = env.reset(seed=0)
+    for camera in ("base_camera", "wrist_camera"):
+        assert obs["sensor_data"][camera]["rgb"].shape == (1, 64, 64, 3)
+        assert obs["sensor_data"][camera]["depth"].shape == (1, 64, 64, 1)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(domain="asteroid"), "valid choices: moon, mars, orbit, earth"),
+        (dict(asset_source="cad"), "valid choices: procedural, dataset"),
+        (dict(asset_source="dataset", clearance=0.002), "clearance applies to procedural assets only"),
+        (dict(clearance=0.0), "clearance must be positive"),
+    ],
+)
+def test_bad_kwargs(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make(**kwargs)
+
+
+@pytest.mark.parametrize("domain", ["moon", "orbit"])
+def test_pegs_and_panel_start_at_rest_where_they_belong(domain):
+    env = make(domain=domain)
+    for seed in range(2):
+        env.reset(seed=seed)
+        u = env.unwrapped
+        start = [p.pose.raw_pose.clone() for p in u.pegs] + [u.panel.pose.raw_pose.clone()]
+        for _ in range(20):
+            env.step(torch.zeros(1, 7))
+        now = [p.pose.raw_pose for p in u.pegs] + [u.panel.pose.raw_pose]
+        # a squashed many-sided peg may roll onto a steadier side: it settles, it does not wander off
+        for before, after in zip(start, now):
+            assert torch.linalg.norm(after[:, :3] - before[:, :3]).item() < 0.01, (domain, seed)
+        assert torch.linalg.norm(u.panel.pose.p - start[-1][:, :3]).item() < 0.005
+        for peg, rest in zip(u.pegs, PEG_REST_XY):
+            assert torch.linalg.norm(peg.pose.p[0, :2] - torch.tensor(rest)).item() < 0.02
+        assert torch.linalg.norm(u.panel_seat()[0, :2, 3] - torch.tensor(PANEL_START_XY)).item() < 0.03
+        assert u.evaluate()["stage"].item() == 0
+    env.close()
+
+
+def _insert(env, socket: int, peg: int = None, lift: float = 0.0):
+    u = env.unwrapped
+    peg = socket if peg is None else peg
+    goal = u._bottom[0, socket].numpy().astype(np.float64).copy()
+    goal[2, 3] += 1e-4 + lift
+    u.pegs[peg].set_pose(sapien.Pose(goal @ np.linalg.inv(u._peg_ends[0, peg, 0].numpy().astype(np.float64))))
+
+
+def _place_panel(env, offset=(0.0, 0.0, 0.0), yaw: float = 0.0):
+    u = env.unwrapped
+    goal = u._panel_target[0].numpy().astype(np.float64).copy()
+    c, s = np.cos(yaw), np.sin(yaw)
+    goal[:3, :3] = goal[:3, :3] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    goal[:3, 3] += np.array(offset) + [0.0, 0.0, 1e-4]
+    u.panel.set_pose(sapien.Pose(goal @ np.linalg.inv(u._seat_in_panel[0].numpy().astype(np.float64))))
+
+
+def _raise_panel(env, height: float):
+    u = env.unwrapped
+    pose = u.panel.pose.sp
+    u.panel.set_pose(sapien.Pose(pose.p + np.array([0.0, 0.0, height]), pose.q))
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+def test_success_needs_four_pegs_in_and_the_panel_seated(asset_source):
+    env = make(asset_source=asset_source)
+    env.reset(seed=2)
+    u = env.unwrapped
+    for socket in range(4):
+        _insert(env, socket)
+    _place_panel(env)
+    assert u.evaluate()["success"].item()
+    _place_panel(env, yaw=np.pi)  # the panel looks the same turned half round
+    assert u.evaluate()["success"].item()
+    _place_panel(env, offset=(0.015, 0.0, 0.0))
+    assert not u.evaluate()["success"].item()
+    _place_panel(env, yaw=np.radians(8))
+    assert not u.evaluate()["success"].item()
+    _place_panel(env)
+    _insert(env, 1, lift=0.5 * u._depth[0].item())  # half way out
+    info = u.evaluate()
+    assert not info["success"].item() and info["socket_filled"][0].tolist() == [True, False, True, True]
+    # pegs of one length may swap sockets; a short peg in a long peg's socket does not count
+    _insert(env, 1, peg=0)
+    _insert(env, 0, peg=1)
+    assert u.evaluate()["socket_filled"][0].tolist() == [True, True, True, True]
+    _insert(env, 2, peg=1, lift=0.3)  # peg 1 out of the way, high above
+    _insert(env, 0, peg=2)
+    assert not u.evaluate()["socket_filled"][0, 0].item()
+    env.close()
+
+
+def _normalized(env, panel_grasped: bool = False) -> float:
+    u = env.unwrapped
+    info = u.evaluate()
+    if panel_grasped:
+        info["panel_grasped"] = torch.ones_like(info["panel_grasped"])
+        info["success"] = torch.zeros_like(info["success"])
+    terms = REWARD_TABLE.weighted({**u._reward_inputs(info), **u._penalty_inputs()})
+    return REWARD_TABLE.normalize(REWARD_TABLE.dense(terms, info["success"])).item()
+
+
+@pytest.mark.parametrize("asset_source", SOURCES)
+def test_reward_rises_strictly_through_the_stages(asset_source):
+    env = make(asset_source=asset_source, reward_mode="normalized_dense")
+    env.reset(seed=4)
+    u = env.unwrapped
+    rewards, stages = [_normalized(env)], [u.evaluate()["stage"].item()]
+    for socket in (2, 3, 0, 1):
+        _insert(env, socket)
+        rewards.append(_normalized(env))
+        stages.append(u.evaluate()["stage"].item())
+    rewards.append(_normalized(env, panel_grasped=True))  # panel grasped on the deck
+    _raise_panel(env, 0.1)
+    rewards.append(_normalized(env, panel_grasped=True))  # lifted
+    _place_panel(env, offset=(0.0, 0.0, 0.03))
+    rewards.append(_normalized(env, panel_grasped=True))  # over its target
+    _place_panel(env)
+    rewards.append(_normalized(env, panel_grasped=True))  # seated, still held
+    rewards.append(_normalized(env))  # released: success
+    assert stages == [0, 1, 2, 3, 4]
+    assert all(b > a for a, b in zip(rewards, rewards[1:])), rewards
+    assert rewards[-1] == pytest.approx(1.0)
+    assert u.evaluate()["stage"].item() == 8
+    env.close()
+
+
+def test_success_gives_the_maximum_reward():
+    env = make(reward_mode="dense")
+    env.reset(seed=0)
+    for _ in range(3):
+        _, reward, _, _, info = env.step(env.action_space.sample())
+        assert reward.item() == pytest.approx(sum(v.item() for v in info["reward_terms"].values()), abs=1e-3)
+        assert 0.0 <= REWARD_TABLE.normalize(reward).item() <= 1.0
+    for socket in range(4):
+        _insert(env, socket)
+    _place_panel(env)
+    info = env.unwrapped.get_info()
+    assert info["success"].item()
+    assert env.unwrapped.get_reward(obs=None, action=torch.zeros(1, 7), info=info).item() == REWARD_TABLE.max_reward
+    env.close()
+
+
+def test_seated_panel_stays_on_the_pegs():
+    for domain in ("moon", "earth"):
+        env = make(domain=domain, control_mode="pd_joint_pos")
+        env.reset(seed=1)
+        for socket in range(4):
+            _insert(env, socket)
+        _place_panel(env)
+        hold = env.unwrapped.agent.robot.get_qpos()[:, :8].clone()
+        for _ in range(40):
+            env.step(hold)
+        assert env.unwrapped.evaluate()["success"].item(), domain
+        env.close()
+
+
+def test_same_seed_same_assets_and_initial_state():
+    a, b = make(), make()
+    a.reset(seed=5), b.reset(seed=5)
+    for key in ("_bottom", "_seat_in_panel"):
+        torch.testing.assert_close(getattr(a.unwrapped, key), getattr(b.unwrapped, key), rtol=0, atol=0)
+    for pa, pb in zip(a.unwrapped.pegs + [a.unwrapped.panel], b.unwrapped.pegs + [b.unwrapped.panel]):
+        torch.testing.assert_close(pa.pose.raw_pose, pb.pose.raw_pose, rtol=0, atol=0)
+    b.reset(seed=6)
+    assert not torch.equal(a.unwrapped._bottom, b.unwrapped._bottom)
+    a.close(), b.close()
+
+
+def test_state_observations():
+    env = make(obs_mode="state_dict")
+    obs, _ = env.reset(seed=0)
+    extra = obs["extra"]
+    for key, size in [
+        ("pegs_pos_in_tcp", 12),
+        ("pegs_rot6d_in_tcp", 24),
+        ("sockets_pos_in_tcp", 12),
+        ("socket_filled", 4),
+        ("peg_inserted", 4),
+        ("handle_pos_in_tcp", 3),
+        ("target_pos_in_seat", 3),
+        ("target_rot6d_in_seat", 6),
+        ("wrist_wrench", 6),
+    ]:
+        assert extra[key].shape == (1, size), key
+    env.close()
