@@ -2,8 +2,8 @@ import textwrap
 
 import pytest
 
-from mani_skill_space.envs import TASKS, task_class
 from mani_skill_space import suites
+from mani_skill_space.envs import TASKS, task_class
 from mani_skill_space.suites import SuiteError, accepted_kwargs, load_suite
 
 GOOD = """
