@@ -42,7 +42,7 @@ class Args:
     suite: Path
     """A suite file, e.g. tasks/smoke.toml."""
     policy: tuple[str, ...] = ("oracle",)
-    """One or more policies: random, zero, oracle or module:callable."""
+    """One or more policies: random, zero, oracle, checkpoint:PATH or module:callable."""
     output_dir: Path = Path("outputs/eval")
     num_workers: int = os.cpu_count() or 1
     video: int = 0
@@ -59,10 +59,12 @@ class Chunk:
     video_dir: Optional[str] = None
 
 
-def env_kwargs(configuration: Configuration, control_mode: Optional[str], render: bool) -> dict:
+def env_kwargs(configuration: Configuration, control_mode: Optional[str], render: bool, obs_mode: Optional[str] = None) -> dict:
     kwargs = dict(configuration.kwargs)
     if control_mode is not None:
         kwargs["control_mode"] = control_mode
+    if obs_mode is not None:
+        kwargs["obs_mode"] = obs_mode
     if render:
         kwargs["render_mode"] = "rgb_array"
     elif kwargs.get("obs_mode", "state") in STATE_OBS_MODES:
@@ -89,7 +91,8 @@ def run_chunk(chunk: Chunk) -> list[EpisodeResult]:
     import mani_skill_space  # noqa: F401  (registers the envs in a spawned worker)
 
     policy = load_policy(chunk.policy)
-    env = _cached_env(chunk.configuration.env_id, env_kwargs(chunk.configuration, getattr(policy, "control_mode", None), chunk.video_dir is not None))
+    kwargs = env_kwargs(chunk.configuration, getattr(policy, "control_mode", None), chunk.video_dir is not None, getattr(policy, "obs_mode", None))
+    env = _cached_env(chunk.configuration.env_id, kwargs)
     results = []
     for seed in chunk.seeds:
         frames: list[np.ndarray] = []

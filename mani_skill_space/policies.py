@@ -4,8 +4,11 @@ A policy may also define ``control_mode`` (the env is made with it; None keeps t
 ``reset(env, seed)`` (called after every ``env.reset(seed=seed)``; ``env`` is the gym env, so privileged
 policies such as the oracles can read ``env.unwrapped``).
 
-``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle`` or ``module:callable``,
-where ``callable`` is a zero-argument factory returning such an object (checkpoints come later through it).
+A policy may define ``obs_mode`` too (the env is made with it; e.g. a checkpoint trained on RGB-D).
+
+``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle``, ``checkpoint:PATH`` (a
+baseline trained by ``baselines/*.py``, see ``mani_skill_space.learning``) or ``module:callable``, where
+``callable`` is a zero-argument factory returning such an object.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ BUILTIN_POLICIES = ("random", "zero", "oracle")
 
 class Policy:
     control_mode: Optional[str] = None
+    obs_mode: Optional[str] = None
 
     def reset(self, env, seed: int) -> None:
         """Called after each ``env.reset(seed=seed)``."""
@@ -76,8 +80,12 @@ def load_policy(spec: str) -> Policy:
     builtins: dict[str, Callable[[], Any]] = {"random": RandomPolicy, "zero": ZeroPolicy, "oracle": OraclePolicy}
     if spec in builtins:
         return builtins[spec]()
+    if spec.startswith("checkpoint:"):
+        from mani_skill_space.learning import CheckpointPolicy
+
+        return CheckpointPolicy(spec.partition(":")[2])
     if ":" not in spec:
-        raise ValueError(f"Unknown policy {spec!r}; valid choices: {', '.join(BUILTIN_POLICIES)} or module:callable")
+        raise ValueError(f"Unknown policy {spec!r}; valid choices: {', '.join(BUILTIN_POLICIES)}, checkpoint:PATH or module:callable")
     module_name, _, attribute = spec.partition(":")
     factory = getattr(importlib.import_module(module_name), attribute)
     policy = factory()

@@ -212,6 +212,14 @@ class Oracle(Policy):
         self.gripper = state
         yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0))
 
+    def open_gently(self, steps: int = 12) -> Iterator[np.ndarray]:
+        """Open the gripper a little at a time, so that a released object is not flicked (in zero gravity it
+        would keep the spin)."""
+        arm = self.hold_action()[:-1]
+        for gripper in np.linspace(self.gripper, GRIPPER_OPEN, steps + 1)[1:]:
+            self.gripper = float(gripper)
+            yield np.hstack([arm, self.gripper]).astype(np.float32)
+
     def _follow(self, positions: np.ndarray) -> Iterator[np.ndarray]:
         for qpos in positions:
             yield np.hstack([qpos, self.gripper]).astype(np.float32)

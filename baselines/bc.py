@@ -1,0 +1,100 @@
+"""Behaviour cloning from oracle demonstrations (state observations), in the style of ManiSkill's baselines.
+
+Demonstrations: generate with the oracle and convert them to the control mode to learn, e.g.
+
+    python -m mani_skill_space.demos -e SampleCollection-v1 -n 200 -j 2 --env-kwargs '{"domain": "mars", "asset_source": "dataset"}'
+    python -m mani_skill_space.replay --traj-path demos/SampleCollection-v1/motionplanning/<name>.h5 \
+        -c pd_ee_delta_pose -o state --save-traj --num-procs 2
+    python baselines/bc.py --demos demos/SampleCollection-v1/motionplanning/<name>.state.pd_ee_delta_pose.physx_cpu.h5
+
+Writes ``runs/<name>/curve.csv`` and ``curve.png`` (loss, and success_once / success_at_end / return of
+periodic evaluations on seeds disjoint from the demonstrations) and ``runs/<name>/checkpoint.pt``, which the
+evaluation CLI scores with ``--policy checkpoint:runs/<name>/checkpoint.pt``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+import tyro
+from tqdm import tqdm
+
+from mani_skill_space.learning import BehaviourCloningPolicy, CheckpointPolicy, LearningCurve, evaluate_policy, load_demonstrations, save_checkpoint
+
+
+@dataclass
+class Args:
+    demos: Path
+    """A ManiSkill trajectory file with state observations (converted with the replay tool)."""
+    num_demos: Optional[int] = None
+    """Use only the first N successful demonstrations."""
+    minutes: float = 30.0
+    """Wall-clock training budget."""
+    max_iterations: int = 100_000
+    batch_size: int = 512
+    lr: float = 3e-4
+    hidden: int = 512
+    eval_every: int = 5000
+    """Evaluate every N iterations (and at the end)."""
+    eval_episodes: int = 10
+    eval_seed_start: int = 10_000
+    """Evaluation seeds start here: disjoint from the demonstrations' (0..)."""
+    output_dir: Path = Path("runs")
+    name: Optional[str] = None
+    seed: int = 0
+
+
+def main(args: Args) -> Path:
+    torch.manual_seed(args.seed)
+    episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
+    env_id, env_kwargs = env_info["env_id"], dict(env_info["env_kwargs"])
+    control_mode = env_kwargs.pop("control_mode")
+    obs_mode = env_kwargs.pop("obs_mode", "state")
+    for key in ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs"):
+        env_kwargs.pop(key, None)
+    obs = torch.as_tensor(np.concatenate([e["obs"][:-1] for e in episodes]))
+    actions = torch.as_tensor(np.concatenate([e["actions"] for e in episodes]))
+    run_dir = args.output_dir / (args.name or f"bc-{env_id}-{int(time.time())}")
+    model_kwargs = dict(state_dim=obs.shape[1], action_dim=actions.shape[1], hidden=args.hidden)
+    model = BehaviourCloningPolicy(**model_kwargs)
+    model.obs_mean.copy_(obs.mean(0))
+    model.obs_std.copy_(obs.std(0).clamp_min(1e-3))
+    optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
+    curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
+    print(f"{len(episodes)} demonstrations, {len(obs)} transitions of {env_id} {env_kwargs}; training in {run_dir}")
+
+    checkpoint = run_dir / "checkpoint.pt"
+    start = time.time()
+    save = lambda: save_checkpoint(checkpoint, "bc", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode)  # noqa: E731
+    eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
+    progress = tqdm(range(1, args.max_iterations + 1), desc="bc")
+    for iteration in progress:
+        batch = torch.randint(0, len(obs), (args.batch_size,))
+        loss = torch.nn.functional.mse_loss(model(obs[batch]), actions[batch])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        minutes = (time.time() - start) / 60
+        out_of_time = minutes >= args.minutes or iteration == args.max_iterations
+        if iteration % 100 == 0:
+            progress.set_postfix(loss=f"{loss.item():.4f}")
+            curve.log(iteration=iteration, minutes=minutes, loss=loss.item())
+        if iteration % args.eval_every == 0 or out_of_time:
+            save()
+            metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
+            curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
+            progress.write(f"iteration {iteration}: {metrics}")
+        if out_of_time:
+            break
+    curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"BC on {env_id}")
+    print(f"checkpoint: {checkpoint}")
+    return checkpoint
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

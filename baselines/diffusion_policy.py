@@ -1,0 +1,129 @@
+"""Diffusion policy (Chi et al. 2023) from oracle demonstrations, state observations, following ManiSkill's
+``examples/baselines/diffusion_policy``: a DDPM (diffusers' scheduler) denoises a chunk of future actions
+conditioned on the last observations; the policy executes the first few actions of each chunk.
+
+    python baselines/diffusion_policy.py --demos demos/.../<name>.state.pd_ee_delta_pose.physx_cpu.h5
+
+Demonstrations as for ``bc.py``. Writes ``runs/<name>/curve.csv``, ``curve.png`` and ``checkpoint.pt`` for
+``python -m mani_skill_space.eval --policy checkpoint:PATH``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+import tyro
+from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
+from tqdm import tqdm
+
+from mani_skill_space.learning import CheckpointPolicy, DiffusionNoisePredictor, LearningCurve, evaluate_policy, load_demonstrations, save_checkpoint
+
+
+@dataclass
+class Args:
+    demos: Path
+    """A ManiSkill trajectory file with state observations (converted with the replay tool)."""
+    num_demos: Optional[int] = None
+    obs_horizon: int = 2
+    action_horizon: int = 8
+    """Actions predicted per chunk."""
+    execute_horizon: int = 4
+    """Actions of each chunk executed before predicting the next."""
+    diffusion_steps: int = 100
+    minutes: float = 30.0
+    max_iterations: int = 100_000
+    batch_size: int = 256
+    lr: float = 1e-4
+    hidden: int = 512
+    eval_every: int = 5000
+    eval_episodes: int = 10
+    eval_seed_start: int = 10_000
+    output_dir: Path = Path("runs")
+    name: Optional[str] = None
+    seed: int = 0
+
+
+def chunk_indices(lengths: list[int]) -> np.ndarray:
+    """(episode, start step) of every training sample: observations up to the start step, actions from it;
+    windows reaching past an episode's ends are padded with its first observation / last action."""
+    return np.array([(e, t) for e, length in enumerate(lengths) for t in range(length)])
+
+
+def gather(episodes, index: np.ndarray, obs_horizon: int, action_horizon: int) -> tuple[torch.Tensor, torch.Tensor]:
+    obs, actions = [], []
+    for e, t in index:
+        episode = episodes[e]
+        length = len(episode["actions"])
+        obs_steps = np.clip(np.arange(t - obs_horizon + 1, t + 1), 0, length)
+        action_steps = np.clip(np.arange(t, t + action_horizon), 0, length - 1)
+        obs.append(episode["obs"][obs_steps])
+        actions.append(episode["actions"][action_steps])
+    return torch.as_tensor(np.stack(obs)), torch.as_tensor(np.stack(actions))
+
+
+def main(args: Args) -> Path:
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
+    env_id, env_kwargs = env_info["env_id"], dict(env_info["env_kwargs"])
+    control_mode = env_kwargs.pop("control_mode")
+    obs_mode = env_kwargs.pop("obs_mode", "state")
+    for key in ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs"):
+        env_kwargs.pop(key, None)
+    all_obs = np.concatenate([e["obs"] for e in episodes])
+    index = chunk_indices([len(e["actions"]) for e in episodes])
+    model_kwargs = dict(
+        state_dim=all_obs.shape[1], action_dim=episodes[0]["actions"].shape[1], obs_horizon=args.obs_horizon, action_horizon=args.action_horizon, hidden=args.hidden
+    )
+    model = DiffusionNoisePredictor(**model_kwargs)
+    model.obs_mean.copy_(torch.as_tensor(all_obs.mean(0)))
+    model.obs_std.copy_(torch.as_tensor(all_obs.std(0)).clamp_min(1e-3))
+    scheduler_config = dict(num_train_timesteps=args.diffusion_steps, beta_schedule="squaredcos_cap_v2", clip_sample=True, prediction_type="epsilon")
+    scheduler = DDPMScheduler(**scheduler_config)
+    optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-6)
+    run_dir = args.output_dir / (args.name or f"diffusion-{env_id}-{int(time.time())}")
+    curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
+    diffusion = dict(
+        scheduler=scheduler_config, obs_horizon=args.obs_horizon, execute_horizon=args.execute_horizon, inference_steps=args.diffusion_steps
+    )
+    checkpoint = run_dir / "checkpoint.pt"
+    save = lambda: save_checkpoint(checkpoint, "diffusion", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode, diffusion=diffusion)  # noqa: E731
+    print(f"{len(episodes)} demonstrations, {len(index)} samples of {env_id} {env_kwargs}; training in {run_dir}")
+    eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
+    start = time.time()
+    progress = tqdm(range(1, args.max_iterations + 1), desc="diffusion")
+    for iteration in progress:
+        model.train()
+        obs, actions = gather(episodes, index[rng.integers(0, len(index), args.batch_size)], args.obs_horizon, args.action_horizon)
+        noise = torch.randn_like(actions)
+        steps = torch.randint(0, scheduler.config.num_train_timesteps, (len(actions),))
+        noisy = scheduler.add_noise(actions, noise, steps)
+        loss = torch.nn.functional.mse_loss(model(noisy, steps, obs), noise)
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        minutes = (time.time() - start) / 60
+        out_of_time = minutes >= args.minutes or iteration == args.max_iterations
+        if iteration % 100 == 0:
+            progress.set_postfix(loss=f"{loss.item():.4f}")
+            curve.log(iteration=iteration, minutes=minutes, loss=loss.item())
+        if iteration % args.eval_every == 0 or out_of_time:
+            model.eval()
+            save()
+            metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
+            curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
+            progress.write(f"iteration {iteration}: {metrics}")
+        if out_of_time:
+            break
+    curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"Diffusion policy on {env_id}")
+    print(f"checkpoint: {checkpoint}")
+    return checkpoint
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,137 @@
+"""Every baseline runs end to end at a tiny size, writes its learning curve (CSV and PNG), and its checkpoint
+scores in the evaluation CLI."""
+
+import csv
+import importlib.util
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+import torch
+
+from mani_skill_space import eval as evaluation
+from mani_skill_space.learning import CheckpointPolicy, load_demonstrations
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV_KWARGS = {"domain": "mars", "asset_source": "dataset"}
+
+
+def _baseline(name: str):
+    spec = importlib.util.spec_from_file_location(f"baseline_{name}", ROOT / "baselines" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def demos(tmp_path_factory):
+    """Two oracle demonstrations of SampleCollection, converted to pd_ee_delta_pose with state observations."""
+    out = tmp_path_factory.mktemp("demos")
+    subprocess.run(
+        [sys.executable, "-m", "mani_skill_space.demos", "-e", "SampleCollection-v1", "-n", "2", "-j", "1", "--record-dir", str(out), "--traj-name", "tiny",
+         "--env-kwargs", json.dumps(ENV_KWARGS)],
+        check=True, cwd=ROOT,
+    )  # fmt: skip
+    raw = out / "SampleCollection-v1" / "motionplanning" / "tiny.h5"
+    subprocess.run(
+        [sys.executable, "-m", "mani_skill_space.replay", "--traj-path", str(raw), "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj"], check=True, cwd=ROOT
+    )
+    converted = sorted(raw.parent.glob("tiny.state.pd_ee_delta_pose*.h5"))
+    assert converted, list(raw.parent.iterdir())
+    return converted[0]
+
+
+def _score(checkpoint: Path, tmp_path: Path) -> dict:
+    suite = tmp_path / "suite.toml"
+    suite.write_text(
+        textwrap.dedent(
+            """
+            name = "baseline-check"
+            episodes = 1
+            seed_start = 20000
+            [[configurations]]
+            env_id = "SampleCollection-v1"
+            kwargs = { domain = "mars", asset_source = "dataset" }
+            """
+        )
+    )
+    report = evaluation.main(evaluation.Args(suite=suite, policy=(f"checkpoint:{checkpoint}",), output_dir=tmp_path / "eval", num_workers=1))
+    row = report["rows"][0]
+    assert row["summary"]["episodes"] == 1
+    assert (tmp_path / "eval" / "results.md").read_text().count("checkpoint:") == 1
+    return row
+
+
+def _curve(run_dir: Path) -> list[dict]:
+    assert (run_dir / "curve.png").stat().st_size > 1000
+    return list(csv.DictReader((run_dir / "curve.csv").open()))
+
+
+def test_demonstrations_load_with_state_observations(demos):
+    episodes, env_info = load_demonstrations(demos)
+    assert env_info["env_id"] == "SampleCollection-v1"
+    assert env_info["env_kwargs"]["control_mode"] == "pd_ee_delta_pose"
+    for episode in episodes:
+        assert len(episode["obs"]) == len(episode["actions"]) + 1
+        assert episode["actions"].shape[1] == 7
+
+
+def test_behaviour_cloning(demos, tmp_path):
+    bc = _baseline("bc")
+    checkpoint = bc.main(bc.Args(demos=demos, max_iterations=200, eval_every=100, eval_episodes=1, output_dir=tmp_path, name="bc"))
+    rows = _curve(tmp_path / "bc")
+    losses = [float(r["loss"]) for r in rows if r["loss"]]
+    assert losses[-1] < losses[0]  # it learns something
+    assert any(r["success_once"] != "" for r in rows)
+    policy = CheckpointPolicy(str(checkpoint))
+    assert (policy.control_mode, policy.obs_mode, policy.env_id) == ("pd_ee_delta_pose", "state", "SampleCollection-v1")
+    _score(checkpoint, tmp_path)
+
+
+def test_diffusion_policy(demos, tmp_path):
+    dp = _baseline("diffusion_policy")
+    checkpoint = dp.main(dp.Args(demos=demos, max_iterations=60, eval_every=60, eval_episodes=0, batch_size=32, diffusion_steps=10, output_dir=tmp_path, name="dp"))
+    _curve(tmp_path / "dp")
+    assert torch.load(checkpoint, weights_only=False)["diffusion"]["inference_steps"] == 10
+    _score(checkpoint, tmp_path)
+
+
+@pytest.mark.parametrize("obs_mode", ["state", "rgbd"])
+def test_ppo(obs_mode, tmp_path):
+    ppo = _baseline("ppo")
+    steps = 160 if obs_mode == "state" else 8  # state: long enough for every env to finish an episode
+    checkpoint = ppo.main(
+        ppo.Args(env_kwargs=json.dumps(ENV_KWARGS), obs_mode=obs_mode, num_envs=2, num_steps=steps, total_timesteps=2 * steps, output_dir=tmp_path, name="ppo")
+    )
+    rows = _curve(tmp_path / "ppo")
+    assert len(rows) == 1
+    if obs_mode == "state":
+        assert int(rows[0]["episodes"]) == 2 and float(rows[0]["return"]) > 0
+    assert CheckpointPolicy(str(checkpoint)).obs_mode == obs_mode
+    _score(checkpoint, tmp_path)
+
+
+def test_sac(tmp_path):
+    sac = _baseline("sac")
+    checkpoint = sac.main(
+        sac.Args(env_kwargs=json.dumps(ENV_KWARGS), num_envs=2, total_timesteps=320, learning_starts=100, batch_size=64, buffer_size=1000, log_every=100, output_dir=tmp_path, name="sac")
+    )
+    rows = _curve(tmp_path / "sac")
+    assert any(r["episodes"] not in ("", "0") for r in rows)
+    _score(checkpoint, tmp_path)
+
+
+def test_checkpoint_of_another_task_is_refused(tmp_path, demos):
+    bc = _baseline("bc")
+    checkpoint = bc.main(bc.Args(demos=demos, max_iterations=10, eval_every=10, eval_episodes=0, output_dir=tmp_path, name="bc"))
+    import gymnasium as gym
+
+    env = gym.make("PegInHoleAssembly-v1", render_backend="none")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="trained on SampleCollection-v1"):
+        CheckpointPolicy(str(checkpoint)).reset(env, 0)
+    env.close()
