@@ -24,7 +24,14 @@ import torch
 import tyro
 from tqdm import tqdm
 
-from mani_skill_space.learning import BehaviourCloningPolicy, CheckpointPolicy, LearningCurve, evaluate_policy, load_demonstrations, save_checkpoint
+from mani_skill_space.learning import (
+    BehaviourCloningPolicy,
+    CheckpointPolicy,
+    LearningCurve,
+    evaluate_policy,
+    load_demonstrations,
+    save_checkpoint,
+)
 
 
 @dataclass

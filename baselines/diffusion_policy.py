@@ -21,7 +21,14 @@ import tyro
 from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
 from tqdm import tqdm
 
-from mani_skill_space.learning import CheckpointPolicy, DiffusionNoisePredictor, LearningCurve, evaluate_policy, load_demonstrations, save_checkpoint
+from mani_skill_space.learning import (
+    CheckpointPolicy,
+    DiffusionNoisePredictor,
+    LearningCurve,
+    evaluate_policy,
+    load_demonstrations,
+    save_checkpoint,
+)
 
 
 @dataclass

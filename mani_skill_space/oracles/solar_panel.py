@@ -14,7 +14,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, PlanningFailed, surface_points
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, PlanningFailed, surface_points
 from mani_skill_space.oracles.peg_in_hole import SETTLE_STEPS, PegInHoleOracle, PegTarget, _backed_off, outside_keepout
 
 INSERTION_ORDER = (2, 3, 0, 1)
