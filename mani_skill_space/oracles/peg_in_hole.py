@@ -42,6 +42,7 @@ INSERT_STEP = 0.0025
 PRESS_DEPTH = 0.003
 """The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
 SETTLE_STEPS = 4
+RETRY_BELOW_FRACTION = 0.9
 RELAXED_HEIGHT = 0.0005
 """Where the tip is held, above the bottom, while the push eases off before letting go."""
 AXIS_KEEPOUT = 0.04
@@ -73,6 +74,11 @@ class PegInHoleOracle(Oracle):
     """Height (m) of the TCP after lifting the peg, before swinging it over the hole."""
     relax_steps = 0
     """Steps spent easing off the push at the end of the insertion (for a peg that will be let go)."""
+    insert_attempts = 1
+    """Pushes tried (the first that gets the peg in ends it)."""
+    insert_step = INSERT_STEP
+    refine_passes = REFINE_PASSES
+    """Steps spent easing off the push at the end of the insertion (for a peg that will be let go)."""
 
     def plan(self, env) -> Iterator[np.ndarray]:
         target = PegTarget(
@@ -103,16 +109,30 @@ class PegInHoleOracle(Oracle):
         yield from self.wait_for_grasp(target.peg, "the peg")
         yield from self.screw_to(_at_height(self._tcp(), self.lift_height), "lift")
 
-        arm = self._line_up(target, end, twist)
-        yield from self.joint_move(arm, "over the hole")
-        for _ in range(REFINE_PASSES + 1):  # re-measure the peg in the hand each time: it may have slipped
-            yield from self.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
-        start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
-        steps = int(np.ceil((start - finish) / INSERT_STEP))
-        height = lambda step: max(finish, start - (step + 1) * INSERT_STEP)  # noqa: E731
-        yield from self.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+        for attempt in range(self.insert_attempts):
+            if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
+                yield from self.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
+            yield from self._push_in(target, end, twist, line_up=attempt == 0)
+            if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
+                break
         if self.relax_steps:  # stop pressing, so that the peg rests where it is when let go
             yield from self.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.relax_steps, "relax")
+
+    def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Iterator[np.ndarray]:
+        bottom, depth = target.bottom, target.depth
+        if line_up:
+            yield from self.joint_move(self._line_up(target, end, twist), "over the hole")
+        for _ in range(self.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
+            yield from self.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+        start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
+        steps = int(np.ceil((start - finish) / self.insert_step))
+        height = lambda step: max(finish, start - (step + 1) * self.insert_step)  # noqa: E731
+        yield from self.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+
+    @staticmethod
+    def _inserted_fraction(target: PegTarget, end: int) -> float:
+        tip = target.end_frames()[end][:3, 3]
+        return 1.0 - float((tip - target.bottom[:3, 3]) @ target.bottom[:3, 2]) / target.depth
 
     # ------------------------------------------------------------------ planning
     def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
