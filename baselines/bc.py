@@ -46,6 +46,9 @@ class Args:
     batch_size: int = 512
     lr: float = 3e-4
     hidden: int = 512
+    obs_noise: float = 0.0
+    """Gaussian noise (in units of each observation's standard deviation) added to training observations, so
+    that the policy has seen states a little off the demonstrations (closed-loop errors compound otherwise)."""
     eval_every: int = 5000
     """Evaluate every N iterations (and at the end)."""
     eval_episodes: int = 10
@@ -82,7 +85,8 @@ def main(args: Args) -> Path:
     progress = tqdm(range(1, args.max_iterations + 1), desc="bc")
     for iteration in progress:
         batch = torch.randint(0, len(obs), (args.batch_size,))
-        loss = torch.nn.functional.mse_loss(model(obs[batch]), actions[batch])
+        inputs = obs[batch] + args.obs_noise * model.obs_std * torch.randn_like(obs[batch])
+        loss = torch.nn.functional.mse_loss(model(inputs), actions[batch])
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()

@@ -138,8 +138,13 @@ class SquashedGaussianActor(nn.Module):
         return torch.tanh(self.mean(self.body(obs["state"]))) * self.scale + self.bias
 
 
+OBS_CLIP = 5.0
+"""Normalised observations are clipped to +-5 standard deviations: contact forces (the wrist wrench) have heavy
+tails, and an unseen spike would otherwise swamp the network's input."""
+
+
 class BehaviourCloningPolicy(nn.Module):
-    """An MLP from (normalised) state to action."""
+    """An MLP from (normalised, clipped) state to action."""
 
     def __init__(self, state_dim: int, action_dim: int, hidden: int = 512, depth: int = 3):
         super().__init__()
@@ -148,7 +153,7 @@ class BehaviourCloningPolicy(nn.Module):
         self.register_buffer("obs_std", torch.ones(state_dim))
 
     def forward(self, state: torch.Tensor) -> torch.Tensor:
-        return self.net((state - self.obs_mean) / self.obs_std)
+        return self.net(torch.clamp((state - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP))
 
     def act(self, obs) -> torch.Tensor:
         return self(obs["state"])
@@ -172,7 +177,7 @@ class DiffusionNoisePredictor(nn.Module):
         frequencies = torch.exp(-np.log(10000.0) * torch.arange(half, device=step.device) / half)
         angles = step.float().reshape(-1, 1) * frequencies[None]
         step_embedding = torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
-        conditioning = ((obs_history - self.obs_mean) / self.obs_std).reshape(n, -1)
+        conditioning = torch.clamp((obs_history - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP).reshape(n, -1)
         out = self.net(torch.cat([noisy_actions.reshape(n, -1), conditioning, step_embedding], dim=-1))
         return out.reshape(n, self.action_horizon, self.action_dim)
 

@@ -1,4 +1,5 @@
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -88,3 +89,10 @@ def test_shipped_corl2024_suite_has_the_papers_six_configurations_of_200_episode
 def test_accepted_kwargs_cover_the_task_the_base_class_and_maniskill():
     accepted = accepted_kwargs(task_class("SampleCollection-v1"))
     assert {"domain", "asset_source", "robot_init_qpos_noise", "obs_mode", "control_mode", "sim_config", "num_envs"} <= accepted
+
+
+@pytest.mark.parametrize("path", sorted(Path("tasks").glob("*.toml")), ids=lambda p: p.name)
+def test_every_shipped_suite_loads_with_every_task_available(path, monkeypatch):
+    monkeypatch.setattr(suites, "PLANNED_ENV_IDS", ())
+    suite = load_suite(path)
+    assert suite.configurations and all(c.available for c in suite.configurations)
