@@ -31,6 +31,7 @@ from mani_skill_space.learning import (
     evaluate_policy,
     load_demonstrations,
     save_checkpoint,
+    task_of_demonstrations,
 )
 
 
@@ -62,11 +63,7 @@ class Args:
 def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
     episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
-    env_id, env_kwargs = env_info["env_id"], dict(env_info["env_kwargs"])
-    control_mode = env_kwargs.pop("control_mode")
-    obs_mode = env_kwargs.pop("obs_mode", "state")
-    for key in ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs"):
-        env_kwargs.pop(key, None)
+    env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
     obs = torch.as_tensor(np.concatenate([e["obs"][:-1] for e in episodes]))
     actions = torch.as_tensor(np.concatenate([e["actions"] for e in episodes]))
     run_dir = args.output_dir / (args.name or f"bc-{env_id}-{int(time.time())}")

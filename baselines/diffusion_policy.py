@@ -28,6 +28,7 @@ from mani_skill_space.learning import (
     evaluate_policy,
     load_demonstrations,
     save_checkpoint,
+    task_of_demonstrations,
 )
 
 
@@ -77,11 +78,7 @@ def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
     episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
-    env_id, env_kwargs = env_info["env_id"], dict(env_info["env_kwargs"])
-    control_mode = env_kwargs.pop("control_mode")
-    obs_mode = env_kwargs.pop("obs_mode", "state")
-    for key in ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs"):
-        env_kwargs.pop(key, None)
+    env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
     all_obs = np.concatenate([e["obs"] for e in episodes])
     index = chunk_indices([len(e["actions"]) for e in episodes])
     model_kwargs = dict(

@@ -414,6 +414,18 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
     return episodes, meta["env_info"]
 
 
+RECORDING_KWARGS = ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs")
+"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task."""
+
+
+def task_of_demonstrations(env_info: dict) -> tuple[str, dict, str, str]:
+    """Env id, task kwargs (domain, asset source, ...), obs mode and control mode of a trajectory file's env info."""
+    env_kwargs = {k: v for k, v in env_info["env_kwargs"].items() if k not in RECORDING_KWARGS}
+    control_mode = env_kwargs.pop("control_mode")
+    obs_mode = env_kwargs.pop("obs_mode", "state")
+    return env_info["env_id"], env_kwargs, obs_mode, control_mode
+
+
 def evaluate_policy(policy: Policy, env_id: str, env_kwargs: dict, seeds: Sequence[int]) -> dict[str, float]:
     """success_once, success_at_end and mean return of ``policy`` over ``seeds``, by the evaluation CLI's
     protocol (a fresh scene per seed, episodes to the time limit)."""
