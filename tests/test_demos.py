@@ -62,3 +62,11 @@ def test_maniskill_replay_converts_demos_to_ee_delta_pose_and_the_dataset_loads_
     assert len(dataset) > 100
     sample = dataset[0]
     assert sample["action"].shape == (7,) and sample["obs"].ndim == 1
+    # the oracle paces its motions so that the converted demonstrations still succeed within the time limit
+    # (imitation learners can only learn what the episode leaves time for)
+    limit = gym.spec("SampleCollection-v1").max_episode_steps
+    with h5py.File(converted) as trajectories:
+        successes = [trajectory["success"][:] for trajectory in trajectories.values()]
+    assert all(success.any() for success in successes)
+    first_successes = [int(np.argmax(success)) for success in successes]
+    assert max(first_successes) < limit, first_successes

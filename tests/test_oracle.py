@@ -1,10 +1,12 @@
 """The oracle solves a fixed handful of seeds in every domain and asset source (physx_cpu, deterministic)."""
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
+from mani_skill_space.oracles.base import _trapezoid
 from mani_skill_space.rollout import run_episode
 
 
@@ -58,3 +60,13 @@ def test_oracle_assembles_the_solar_panel(domain, asset_source, seed):
     result = run_episode(env, oracle_for("SolarPanelAssembly-v1"), seed)
     assert result.success_at_end, (domain, asset_source, seed, result.failure)
     env.close()
+
+
+@pytest.mark.parametrize("distance", [0.3, 1.0, 4.0, 37.5])
+def test_paced_motions_ramp_up_to_full_pace_and_down_again(distance):
+    advances = _trapezoid(distance, ramp_steps=5)
+    assert advances.sum() == pytest.approx(distance)
+    assert np.all(advances > 0) and advances.max() <= 1.0 + 1e-9
+    np.testing.assert_allclose(advances, advances[::-1])  # as long slowing down as speeding up
+    half = advances[: (len(advances) + 1) // 2]
+    assert np.all(np.diff(half) >= -1e-12) and np.all(np.diff(half) <= 0.2 + 1e-9)  # no jolt: 1/5 of the pace a step

@@ -17,11 +17,14 @@ from typing import Callable, Iterator, Optional
 import numpy as np
 import sapien
 from mani_skill.examples.motionplanning.panda.motionplanner import PandaArmMotionPlanningSolver
+from scipy.spatial.transform import Rotation
 
 from mani_skill_space.policies import Policy
 
 GRIPPER_OPEN = 1.0
 GRIPPER_CLOSED = -1.0
+TCP_RAMP_STEPS = 5
+"""Steps over which an oracle with a ``tcp_pace`` speeds up to it (and slows down from it)."""
 SURFACE_POINTS_PER_PART = 256
 POINT_SPACING = 0.02
 """About one obstacle point per 2 x 2 cm of surface: no arm link fits between them."""
@@ -40,6 +43,10 @@ class PlanningFailed(RuntimeError):
 
 class Oracle(Policy):
     control_mode = "pd_joint_pos"
+    tcp_pace: Optional[tuple[float, float]] = None
+    """(metres, radians): where set, every motion is retimed to move the TCP target this far per control step (or
+    turn it this far, whichever comes first), a pace ``pd_ee_delta_pose`` (0.1 m / 0.1 rad per step, less its PD
+    lag) follows step for step: the demonstrations then convert to it without stretching."""
 
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
@@ -104,7 +111,8 @@ class Oracle(Policy):
             positions = self._screw_path(self.arm_qpos(), pose)
             if positions is None:
                 positions = self._joint_path(pose, what)
-        yield from self._follow(np.concatenate([positions, np.repeat(positions[-1:], settle_steps, axis=0)]))
+        yield from self._follow(positions)
+        yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
     @contextmanager
     def _speed(self, scale: float):
@@ -167,6 +175,38 @@ class Oracle(Policy):
             return np.asarray(start)[None]
         return result["position"] if result["status"] == "Success" else None
 
+    def tcp_path(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> tuple[np.ndarray, list[Rotation]]:
+        """TCP positions (world frame) and orientations along the straight joint-space move from ``start`` to
+        ``goal``."""
+        return self._tcp_poses([start + t * (goal - start) for t in np.linspace(0.0, 1.0, samples)])
+
+    def _tcp_poses(self, joint_positions) -> tuple[np.ndarray, list[Rotation]]:
+        planner = self.solver.planner
+        model, tcp = planner.pinocchio_model, planner.move_group_link_id
+        positions, rotations = [], []
+        for qpos in joint_positions:
+            model.compute_forward_kinematics(planner.pad_qpos(qpos))
+            pose = self.solver.base_pose * sapien.Pose(*np.split(model.get_link_pose(tcp), [3]))
+            positions.append(pose.p)
+            rotations.append(Rotation.from_quat(np.roll(pose.q, -1)))  # wxyz -> xyzw
+        return np.asarray(positions), rotations
+
+    def steps_along(self, positions: np.ndarray, rotations: list[Rotation]) -> float:
+        """About how many control steps a TCP path takes at ``tcp_pace``."""
+        return float(self._paces(positions, rotations).sum())
+
+    def _paces(self, positions: np.ndarray, rotations: list[Rotation]) -> np.ndarray:
+        """Each segment of a TCP path in steps at ``tcp_pace`` (its move or its turn, whichever is further)."""
+        metres, radians = self.tcp_pace
+        moves = np.linalg.norm(np.diff(positions, axis=0), axis=1) / metres
+        turns = np.array([(a.inv() * b).magnitude() for a, b in zip(rotations, rotations[1:])]) / radians
+        return np.maximum(moves, turns)
+
+    def joint_limit_margin(self, qpos: np.ndarray) -> float:
+        """How far (rad) the arm joints at ``qpos`` are from their nearest limit."""
+        limits = np.asarray(self.solver.planner.joint_limits)[: len(qpos)]
+        return float(np.min(np.minimum(qpos - limits[:, 0], limits[:, 1] - qpos)))
+
     def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
         planner = self.solver.planner
         for t in np.linspace(0.0, 1.0, samples):
@@ -210,7 +250,7 @@ class Oracle(Policy):
 
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
         self.gripper = state
-        yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0))
+        yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0), retime=False)
 
     def open_gently(self, steps: int = 12) -> Iterator[np.ndarray]:
         """Open the gripper a little at a time, so that a released object is not flicked (in zero gravity it
@@ -220,9 +260,31 @@ class Oracle(Policy):
             self.gripper = float(gripper)
             yield np.hstack([arm, self.gripper]).astype(np.float32)
 
-    def _follow(self, positions: np.ndarray) -> Iterator[np.ndarray]:
+    def _follow(self, positions: np.ndarray, retime: bool = True) -> Iterator[np.ndarray]:
+        if retime and self.tcp_pace is not None:
+            positions = self._retimed_to_tcp_pace(positions)
         for qpos in positions:
             yield np.hstack([qpos, self.gripper]).astype(np.float32)
+
+    def _retimed_to_tcp_pace(self, positions: np.ndarray) -> np.ndarray:
+        """``positions`` (a joint path, one target per control step) resampled along the same path so that the TCP
+        moves at ``tcp_pace``, reaching it in ``TCP_RAMP_STEPS`` steps and slowing down as long at the end (a
+        jolt would fling a held object)."""
+        path = np.concatenate([self.arm_qpos()[None], positions])
+        progress = np.concatenate([[0.0], np.cumsum(self._paces(*self._tcp_poses(path)))])
+        if progress[-1] < 1e-6:
+            return positions
+        steps = np.cumsum(_trapezoid(progress[-1], TCP_RAMP_STEPS))
+        return np.stack([np.interp(steps, progress, path[:, joint]) for joint in range(path.shape[1])], axis=1)
+
+
+def _trapezoid(distance: float, ramp_steps: int) -> np.ndarray:
+    """Per-step advances (at most 1) covering ``distance``: up by 1 / ramp_steps a step, full pace, and down."""
+    half: list[float] = []
+    while sum(half) < distance / 2:
+        half.append(min(1.0, (len(half) + 1) / ramp_steps))
+    advances = np.array(half + half[::-1])
+    return advances * distance / advances.sum()
 
 
 def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:
