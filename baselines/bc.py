@@ -8,8 +8,9 @@ Demonstrations: generate with the oracle and convert them to the control mode to
     python baselines/bc.py --demos demos/SampleCollection-v1/motionplanning/<name>.state.pd_ee_delta_pose.physx_cpu.h5
 
 Writes ``runs/<name>/curve.csv`` and ``curve.png`` (loss, and success_once / success_at_end / return of
-periodic evaluations on seeds disjoint from the demonstrations) and ``runs/<name>/checkpoint.pt``, which the
-evaluation CLI scores with ``--policy checkpoint:runs/<name>/checkpoint.pt``.
+periodic evaluations on seeds disjoint from the demonstrations), ``runs/<name>/checkpoint.pt`` (the last) and
+``runs/<name>/best.pt`` (the best in those evaluations; BC overfits its demonstrations as it trains on), which
+the evaluation CLI scores with ``--policy checkpoint:runs/<name>/best.pt``.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import tyro
 from tqdm import tqdm
 
 from mani_skill_space.learning import (
+    BestCheckpoint,
     BehaviourCloningPolicy,
     CheckpointPolicy,
     LearningCurve,
@@ -76,6 +78,7 @@ def main(args: Args) -> Path:
     print(f"{len(episodes)} demonstrations, {len(obs)} transitions of {env_id} {env_kwargs}; training in {run_dir}")
 
     checkpoint = run_dir / "checkpoint.pt"
+    best = BestCheckpoint(checkpoint)
     start = time.time()
     save = lambda: save_checkpoint(checkpoint, "bc", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode)  # noqa: E731
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
@@ -96,11 +99,11 @@ def main(args: Args) -> Path:
             save()
             metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
             curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
-            progress.write(f"iteration {iteration}: {metrics}")
+            progress.write(f"iteration {iteration}: {metrics}" + (" (best so far)" if metrics and best.update(metrics) else ""))
         if out_of_time:
             break
     curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"BC on {env_id}")
-    print(f"checkpoint: {checkpoint}")
+    print(f"checkpoint: {checkpoint}" + (f", best in training evaluations: {best.path}" if best.score else ""))
     return checkpoint
 
 

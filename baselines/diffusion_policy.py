@@ -4,8 +4,9 @@ conditioned on the last observations; the policy executes the first few actions 
 
     python baselines/diffusion_policy.py --demos demos/.../<name>.state.pd_ee_delta_pose.physx_cpu.h5
 
-Demonstrations as for ``bc.py``. Writes ``runs/<name>/curve.csv``, ``curve.png`` and ``checkpoint.pt`` for
-``python -m mani_skill_space.eval --policy checkpoint:PATH``.
+Demonstrations as for ``bc.py``. Writes ``runs/<name>/curve.csv``, ``curve.png``, ``checkpoint.pt`` (the last) and
+``best.pt`` (the best in the training-time evaluations) for ``python -m mani_skill_space.eval --policy
+checkpoint:PATH``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
 from tqdm import tqdm
 
 from mani_skill_space.learning import (
+    BestCheckpoint,
     CheckpointPolicy,
     DiffusionNoisePredictor,
     LearningCurve,
@@ -96,6 +98,7 @@ def main(args: Args) -> Path:
         scheduler=scheduler_config, obs_horizon=args.obs_horizon, execute_horizon=args.execute_horizon, inference_steps=args.diffusion_steps
     )
     checkpoint = run_dir / "checkpoint.pt"
+    best = BestCheckpoint(checkpoint)
     save = lambda: save_checkpoint(checkpoint, "diffusion", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode, diffusion=diffusion)  # noqa: E731
     print(f"{len(episodes)} demonstrations, {len(index)} samples of {env_id} {env_kwargs}; training in {run_dir}")
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
@@ -121,11 +124,11 @@ def main(args: Args) -> Path:
             save()
             metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
             curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
-            progress.write(f"iteration {iteration}: {metrics}")
+            progress.write(f"iteration {iteration}: {metrics}" + (" (best so far)" if metrics and best.update(metrics) else ""))
         if out_of_time:
             break
     curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"Diffusion policy on {env_id}")
-    print(f"checkpoint: {checkpoint}")
+    print(f"checkpoint: {checkpoint}" + (f", best in training evaluations: {best.path}" if best.score else ""))
     return checkpoint
 
 

@@ -9,6 +9,7 @@ checkpoint:PATH`` rebuilds the policy and scores it by the same protocol as ever
 from __future__ import annotations
 
 import csv
+import shutil
 from collections import deque
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -424,6 +425,27 @@ def task_of_demonstrations(env_info: dict) -> tuple[str, dict, str, str]:
     control_mode = env_kwargs.pop("control_mode")
     obs_mode = env_kwargs.pop("obs_mode", "state")
     return env_info["env_id"], env_kwargs, obs_mode, control_mode
+
+
+class BestCheckpoint:
+    """Keeps a copy (``best.pt`` beside the checkpoint) of the checkpoint that scored best in the evaluations made
+    while training (by success_at_end, then success_once, then return), as ManiSkill's baselines keep their
+    ``best_eval_success_at_end`` checkpoint: imitation learners overfit their demonstrations as they train on."""
+
+    KEYS = ("success_at_end", "success_once", "episode_return")
+
+    def __init__(self, checkpoint: Path):
+        self.checkpoint, self.path = Path(checkpoint), Path(checkpoint).with_name("best.pt")
+        self.score: Optional[tuple[float, ...]] = None
+
+    def update(self, metrics: dict[str, float]) -> bool:
+        """Copy the checkpoint if ``metrics`` (its evaluation) beat every earlier one; say whether it did."""
+        score = tuple(metrics[key] for key in self.KEYS)
+        if self.score is not None and score <= self.score:
+            return False
+        shutil.copyfile(self.checkpoint, self.path)
+        self.score = score
+        return True
 
 
 def evaluate_policy(policy: Policy, env_id: str, env_kwargs: dict, seeds: Sequence[int]) -> dict[str, float]:

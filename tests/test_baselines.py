@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from mani_skill_space import eval as evaluation
-from mani_skill_space.learning import CheckpointPolicy, load_demonstrations
+from mani_skill_space.learning import BestCheckpoint, CheckpointPolicy, load_demonstrations
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_KWARGS = {"domain": "mars", "asset_source": "dataset"}
@@ -87,6 +87,7 @@ def test_behaviour_cloning(demos, tmp_path):
     losses = [float(r["loss"]) for r in rows if r["loss"]]
     assert losses[-1] < losses[0]  # it learns something
     assert any(r["success_once"] != "" for r in rows)
+    assert (tmp_path / "bc" / "best.pt").exists()  # the best of the training-time evaluations
     policy = CheckpointPolicy(str(checkpoint))
     assert (policy.control_mode, policy.obs_mode, policy.env_id) == ("pd_ee_delta_pose", "state", "SampleCollection-v1")
     _score(checkpoint, tmp_path)
@@ -135,3 +136,19 @@ def test_checkpoint_of_another_task_is_refused(tmp_path, demos):
     with pytest.raises(ValueError, match="trained on SampleCollection-v1"):
         CheckpointPolicy(str(checkpoint)).reset(env, 0)
     env.close()
+
+
+def test_the_best_checkpoint_is_kept_by_success_at_end_then_success_once_then_return(tmp_path):
+    checkpoint = tmp_path / "checkpoint.pt"
+    best = BestCheckpoint(checkpoint)
+    evaluations = [  # (success_at_end, success_once, return), whether it is the best so far
+        ((0.2, 0.3, 10.0), True),
+        ((0.1, 0.9, 50.0), False),
+        ((0.2, 0.3, 12.0), True),
+        ((0.2, 0.3, 12.0), False),  # a tie keeps the earlier checkpoint
+        ((0.4, 0.4, 1.0), True),
+    ]
+    for version, (scores, is_best) in enumerate(evaluations):
+        checkpoint.write_text(str(version))
+        assert best.update(dict(zip(BestCheckpoint.KEYS, scores))) == is_best
+    assert best.path == tmp_path / "best.pt" and best.path.read_text() == "4"
