@@ -26,8 +26,8 @@ import tyro
 from tqdm import tqdm
 
 from mani_skill_space.learning import (
-    BestCheckpoint,
     BehaviourCloningPolicy,
+    BestCheckpoint,
     CheckpointPolicy,
     LearningCurve,
     evaluate_policy,
@@ -43,18 +43,18 @@ class Args:
     """A ManiSkill trajectory file with state observations (converted with the replay tool)."""
     num_demos: Optional[int] = None
     """Use only the first N successful demonstrations."""
-    minutes: float = 30.0
-    """Wall-clock training budget."""
+    minutes: float = 20.0
+    """Wall-clock training budget (evaluations included)."""
     max_iterations: int = 100_000
     batch_size: int = 512
     lr: float = 3e-4
     hidden: int = 512
-    obs_noise: float = 0.0
+    obs_noise: float = 0.05
     """Gaussian noise (in units of each observation's standard deviation) added to training observations, so
     that the policy has seen states a little off the demonstrations (closed-loop errors compound otherwise)."""
-    eval_every: int = 5000
+    eval_every: int = 4000
     """Evaluate every N iterations (and at the end)."""
-    eval_episodes: int = 10
+    eval_episodes: int = 20
     eval_seed_start: int = 10_000
     """Evaluation seeds start here: disjoint from the demonstrations' (0..)."""
     output_dir: Path = Path("runs")

@@ -32,7 +32,7 @@ DROP_OFFSET = (0.0, 0.06)
 class SampleCollectionOracle(Oracle):
     tcp_pace = (0.045, 0.035)
     """The fastest pace at which the demonstrations convert to ``pd_ee_delta_pose`` step for step (its PD lag
-    clips faster rotations): converted, they succeed in about 120 of the episode's 150 steps."""
+    clips faster rotations): converted, they first succeed after about 125 of the episode's 150 steps."""
 
     def plan(self, env) -> Iterator[np.ndarray]:
         self.make_solver(env)
