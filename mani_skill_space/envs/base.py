@@ -31,6 +31,7 @@ from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
 from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.asset import Asset, look_at
+from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE
 from mani_skill_space.procgen.resting import resting_orientations
 from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
 from mani_skill_space.rewards import RewardTable, RewardTerm, action_rate
@@ -309,3 +310,14 @@ def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     half = yaw / 2
     zeros = torch.zeros_like(half)
     return quaternion_multiply(torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1), quaternion)
+
+
+def socket_clearance(clearance: Optional[float], asset_source: str) -> float:
+    """The ``clearance`` kwarg of the tasks with procedurally cut sockets, checked: it applies to procedural assets
+    only (the dataset sockets have a fixed 1 mm) and must be positive; None gives the default (1 mm)."""
+    if clearance is not None and asset_source == "dataset":
+        raise ValueError("clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
+    checked = DEFAULT_CLEARANCE if clearance is None else float(clearance)
+    if checked <= 0:
+        raise ValueError(f"clearance must be positive (metres), got {clearance}")
+    return checked

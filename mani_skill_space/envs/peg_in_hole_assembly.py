@@ -8,11 +8,18 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, build_samples, turned_about_z
+from mani_skill_space.envs.base import (
+    PENALTY_TERMS,
+    RestingPlacement,
+    SpaceManipulationEnv,
+    build_samples,
+    socket_clearance,
+    turned_about_z,
+)
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.geometry import insertion_measures, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE, make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
@@ -82,11 +89,7 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
 
     def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        if clearance is not None and (asset_source or self.DEFAULT_ASSET_SOURCE) == "dataset":
-            raise ValueError("clearance applies to procedural pairs only; the dataset socket has a fixed 1 mm clearance")
-        self.clearance = DEFAULT_CLEARANCE if clearance is None else float(clearance)
-        if self.clearance <= 0:
-            raise ValueError(f"clearance must be positive (metres), got {clearance}")
+        self.clearance = socket_clearance(clearance, asset_source or self.DEFAULT_ASSET_SOURCE)
         super().__init__(*args, asset_source=asset_source, **kwargs)
 
     def _make_mount(self):

@@ -8,11 +8,17 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, build_samples, turned_about_z
+from mani_skill_space.envs.base import (
+    PENALTY_TERMS,
+    RestingPlacement,
+    SpaceManipulationEnv,
+    build_samples,
+    socket_clearance,
+    turned_about_z,
+)
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.geometry import insertion_measures, pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
-from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE
 from mani_skill_space.procgen.solar_panel import (
     LONG_SOCKETS,
     RECEPTACLE_DEPTH,
@@ -115,11 +121,7 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
 
     def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        if clearance is not None and (asset_source or self.DEFAULT_ASSET_SOURCE) == "dataset":
-            raise ValueError("clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
-        self.clearance = DEFAULT_CLEARANCE if clearance is None else float(clearance)
-        if self.clearance <= 0:
-            raise ValueError(f"clearance must be positive (metres), got {clearance}")
+        self.clearance = socket_clearance(clearance, asset_source or self.DEFAULT_ASSET_SOURCE)
         super().__init__(*args, asset_source=asset_source, **kwargs)
 
     def _make_mount(self):

@@ -44,7 +44,7 @@ def test_reset_and_step_in_every_domain_and_asset_source(domain, asset_source, o
     "kwargs, message",
     [
         (dict(domain="asteroid"), "valid choices: moon, mars, orbit, earth"),
-        (dict(asset_source="dataset", clearance=0.002), "clearance applies to procedural pairs only"),
+        (dict(asset_source="dataset", clearance=0.002), "clearance applies to procedural assets only"),
         (dict(clearance=0.0), "clearance must be positive"),
         (dict(clearance=-0.001), "clearance must be positive"),
     ],
