@@ -20,6 +20,7 @@ import inspect
 import re
 import tomllib
 from dataclasses import dataclass, field
+from importlib.resources import files
 from pathlib import Path
 from typing import Any, Optional
 
@@ -66,8 +67,36 @@ class Suite:
     configurations: tuple[Configuration, ...] = field(default_factory=tuple)
 
 
-def load_suite(path: str | Path) -> Suite:
-    path = Path(path)
+SHIPPED_SUITES_PACKAGE = "mani_skill_space.tasks"
+"""The package holding the suites that ship with mani-skill-space (the repository's ``tasks/`` folder)."""
+
+
+def shipped_suites() -> list[str]:
+    """Names of the suites that ship inside the package (``smoke``, ...), sorted."""
+    return sorted(entry.name.removesuffix(".toml") for entry in files(SHIPPED_SUITES_PACKAGE).iterdir() if entry.name.endswith(".toml"))
+
+
+def suite_path(path_or_name: str | Path) -> Path:
+    """The file of a suite given by path or by the name of a shipped suite.
+
+    A name (no ``/``, no ``.toml`` suffix, not an existing file) such as ``smoke`` is the shipped
+    ``smoke.toml``; anything else is a path.
+    """
+    text = str(path_or_name)
+    if "/" in text or text.endswith(".toml") or Path(text).is_file():
+        path = Path(path_or_name)
+        if not path.is_file():
+            raise SuiteError(f"{path}: no such suite file; shipped suites: {', '.join(shipped_suites())}")
+        return path
+    shipped = files(SHIPPED_SUITES_PACKAGE).joinpath(f"{text}.toml")
+    if not shipped.is_file():
+        raise SuiteError(f"unknown suite {text!r}; shipped suites: {', '.join(shipped_suites())} (or give the path of a .toml file)")
+    return Path(str(shipped))
+
+
+def load_suite(path_or_name: str | Path) -> Suite:
+    """Load a suite from a file, or a shipped suite by name (``load_suite("smoke")``)."""
+    path = suite_path(path_or_name)
     text = path.read_text()
     try:
         data = tomllib.loads(text)

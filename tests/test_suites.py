@@ -96,3 +96,39 @@ def test_every_shipped_suite_loads_with_every_task_available(path, monkeypatch):
     monkeypatch.setattr(suites, "PLANNED_ENV_IDS", ())
     suite = load_suite(path)
     assert suite.configurations and all(c.available for c in suite.configurations)
+
+
+def test_shipped_suites_are_the_repositorys_tasks_folder():
+    assert suites.shipped_suites() == sorted(path.stem for path in Path("tasks").glob("*.toml"))
+    assert "smoke" in suites.shipped_suites()
+
+
+def test_a_suite_name_loads_the_shipped_suite(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    suite = load_suite("smoke")
+    assert suite.name == "smoke"
+    assert suite.path.parent.name == "tasks" and suite.path.is_file()
+    assert suite == load_suite(suite.path)
+
+
+def test_a_path_wins_over_a_shipped_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _write(tmp_path, GOOD).rename(tmp_path / "smoke")
+    assert load_suite("smoke").name == "tiny"
+    assert load_suite(Path("smoke")).name == "tiny"
+
+
+def test_an_unknown_suite_name_lists_the_shipped_suites(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SuiteError) as error:
+        load_suite("smok")
+    message = str(error.value)
+    assert "unknown suite 'smok'" in message
+    assert all(name in message for name in suites.shipped_suites())
+
+
+@pytest.mark.parametrize("missing", ["missing.toml", "nowhere/suite.toml"])
+def test_a_missing_suite_file_is_a_suite_error_naming_the_file(tmp_path, monkeypatch, missing):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SuiteError, match=f"^{missing}: no such suite file; shipped suites: .*smoke"):
+        load_suite(missing)
