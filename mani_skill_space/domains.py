@@ -56,6 +56,13 @@ class Domain:
     """Texture of the ground: the terrain's, or that of plain ground; None where there is no ground (orbit)."""
     rock_flavour: str
     """Procedural rock style of this domain (``procgen.rock.ROCK_FLAVOURS``)."""
+    has_ground: bool
+    """Whether there is a surface to stand on: on a planet or an asteroid the arm rides a rover on the ground;
+    in orbit (no ground) it stands on a station's work platform and nothing falls."""
+
+    def __post_init__(self):
+        if self.has_ground != (self.ground_texture is not None):
+            raise ValueError(f"domain {self.name!r}: a domain with ground needs a ground texture, one without needs none")
 
     @property
     def gravity_vector(self) -> list[float]:
@@ -100,11 +107,11 @@ ASTEROID_TERRAIN = TerrainStyle(
 DOMAINS: dict[str, Domain] = {
     d.name: d
     for d in (
-        Domain("moon", 1.62496, 1361.0, 5778.0, "stars", (0.55, 0.55, 0.6), LUNAR_TERRAIN, LUNAR_TERRAIN.texture, "lunar"),
-        Domain("mars", 3.72076, 729.0, 6250.0, "mars_day", (1.0, 0.78, 0.55), MARTIAN_TERRAIN, MARTIAN_TERRAIN.texture, "martian"),
-        Domain("orbit", 0.0, 1361.0, 5778.0, "orbit_earth_limb", (0.55, 0.65, 0.85), None, None, "lunar"),
-        Domain("earth", 9.80665, 775.0, 5750.0, "earth_day", (0.75, 0.85, 1.0), None, "earth_soil", "martian"),
-        Domain("asteroid", 0.14219, 190.0, 5778.0, "stars", (0.5, 0.5, 0.55), ASTEROID_TERRAIN, ASTEROID_TERRAIN.texture, "lunar"),
+        Domain("moon", 1.62496, 1361.0, 5778.0, "stars", (0.55, 0.55, 0.6), LUNAR_TERRAIN, LUNAR_TERRAIN.texture, "lunar", has_ground=True),
+        Domain("mars", 3.72076, 729.0, 6250.0, "mars_day", (1.0, 0.78, 0.55), MARTIAN_TERRAIN, MARTIAN_TERRAIN.texture, "martian", has_ground=True),
+        Domain("orbit", 0.0, 1361.0, 5778.0, "orbit_earth_limb", (0.55, 0.65, 0.85), None, None, "lunar", has_ground=False),
+        Domain("earth", 9.80665, 775.0, 5750.0, "earth_day", (0.75, 0.85, 1.0), None, "earth_soil", "martian", has_ground=True),
+        Domain("asteroid", 0.14219, 190.0, 5778.0, "stars", (0.5, 0.5, 0.55), ASTEROID_TERRAIN, ASTEROID_TERRAIN.texture, "lunar", has_ground=True),
     )
 }
 

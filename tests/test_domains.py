@@ -16,7 +16,8 @@ def test_domain_table_matches_the_reference_figures():
 
 
 def test_ground_per_domain():
-    assert DOMAINS["orbit"].terrain is None and DOMAINS["orbit"].ground_texture is None
+    assert DOMAINS["orbit"].terrain is None and DOMAINS["orbit"].ground_texture is None and not DOMAINS["orbit"].has_ground
+    assert all(DOMAINS[name].has_ground for name in ("moon", "mars", "earth", "asteroid"))
     assert DOMAINS["earth"].terrain is None and DOMAINS["earth"].ground_texture == "earth_soil"
     for name in ("moon", "mars", "asteroid"):
         assert DOMAINS[name].terrain is not None and DOMAINS[name].ground_texture == DOMAINS[name].terrain.texture
@@ -58,3 +59,12 @@ def test_blackbody_colour_warms_as_temperature_drops():
     assert warm[0] == 1 and warm[2] < 0.5
     assert np.all(neutral > 0.9)
     assert cool[2] == 1 and cool[0] < 1
+
+
+def test_a_domain_with_ground_needs_its_texture():
+    import dataclasses
+
+    with pytest.raises(ValueError, match="ground texture"):
+        dataclasses.replace(DOMAINS["orbit"], has_ground=True)
+    with pytest.raises(ValueError, match="ground texture"):
+        dataclasses.replace(DOMAINS["moon"], has_ground=False)

@@ -239,6 +239,13 @@ class SpaceManipulationEnv(BaseEnv):
     def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
         raise NotImplementedError
 
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
+        """The sum of the weighted terms ``get_info`` reported; success gives the table's maximum."""
+        return self.REWARD_TABLE.dense(info["reward_terms"], info["success"])
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
+        return self.REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
+
     def is_grasping(self, actor) -> torch.Tensor:
         return self.agent.is_grasping(actor, min_force=GRASP_MIN_FORCE)
 
@@ -277,11 +284,6 @@ class SpaceManipulationEnv(BaseEnv):
     def wrist_wrench(self) -> torch.Tensor:
         """Spatial force (force, torque) the wrist joint transmits to the hand: what a wrist F/T sensor measures."""
         return self.agent.robot.get_link_incoming_joint_forces()[:, self._wrist_link_index].to(self.device)
-
-
-def build_samples(env: SpaceManipulationEnv, assets: list[Asset], name: str) -> Any:
-    """Per-env dynamic objects placed out of the way; ``_initialize_episode`` poses them."""
-    return build_actor_per_env(env.scene, assets, name, body_type="dynamic", initial_pose=sapien.Pose(p=[0, 0, 2.0]))
 
 
 class RestingPlacement:

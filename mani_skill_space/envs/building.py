@@ -146,6 +146,11 @@ def build_actor_per_env(
     return merged
 
 
+def build_dynamic_per_env(scene: ManiSkillScene, assets: Sequence[Asset], name: str) -> Actor:
+    """Per-env dynamic objects (``assets[i]`` in env ``i``) placed out of the way; ``_initialize_episode`` poses them."""
+    return build_actor_per_env(scene, assets, name, body_type="dynamic", initial_pose=sapien.Pose(p=[0, 0, 2.0]))
+
+
 def build_skydome(scene: ManiSkillScene, texture_path: str, name: str = "skydome") -> Actor:
     """A visual-only inverted sphere whose emissive texture is the sky (cheap on CPU, unlike HDR maps)."""
     vertices, triangles, normals, uvs = make_skydome_mesh(SKYDOME_RADIUS)

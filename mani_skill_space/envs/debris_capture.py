@@ -1,12 +1,11 @@
-from typing import Any
-
 import numpy as np
 import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, build_samples
+from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv
+from mani_skill_space.envs.building import build_dynamic_per_env
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix, step_velocities
 from mani_skill_space.procgen.asset import look_at
 from mani_skill_space.procgen.debris import make_debris
@@ -96,7 +95,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         return look_at((0.55, -1.5, 0.95), (0.5, 0.0, 0.4))
 
     def _make_mount(self):
-        return make_station() if self.domain.ground_texture is None else make_rover()
+        return make_rover() if self.domain.has_ground else make_station()
 
     def _load_scene(self, options: dict):
         self._load_domain_scene()
@@ -106,7 +105,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         else:
             assets = [load_dataset_object(DATASET_DEBRIS[seed % len(DATASET_DEBRIS)]) for seed in seeds]
         self.debris_assets = assets
-        self.debris = build_samples(self, assets, "debris")
+        self.debris = build_dynamic_per_env(self.scene, assets, "debris")
         # free flight: no damping, and never asleep however slowly it drifts
         self.debris.linear_damping = 0.0
         self.debris.angular_damping = 0.0
@@ -235,9 +234,3 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
             slow_down=torch.where(grasped, info["debris_speed"], far),
             stop_spin=torch.where(grasped, info["debris_spin"], far),
         )
-
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
-
-    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))

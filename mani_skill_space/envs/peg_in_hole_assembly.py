@@ -1,26 +1,28 @@
-from typing import Any, Optional
+from typing import Optional
 
 import numpy as np
 import sapien
 import torch
-from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import (
-    PENALTY_TERMS,
-    RestingPlacement,
-    SpaceManipulationEnv,
-    build_samples,
-    socket_clearance,
-    turned_about_z,
+from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
+from mani_skill_space.envs.building import build_actor_per_env, build_dynamic_per_env
+from mani_skill_space.envs.insertion import (
+    PEG_DROP_CLEARANCE,
+    PegInsertion,
+    insertion_inputs,
+    insertion_terms,
+    is_aligned,
+    is_inserted,
+    lying_peg_orientation,
+    peg_placement,
 )
-from mani_skill_space.envs.building import build_actor_per_env
-from mani_skill_space.geometry import insertion_measures, pose_matrix, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
-from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
+from mani_skill_space.rewards import RewardTable
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
 """The hole module (or the socket's post) stands here, on the ground or the station's platform: far enough
@@ -28,27 +30,8 @@ from the rover that even the 200 mm peg, lying in front of the module, clears th
 PEG_DISTANCE = (0.24, 0.28)
 """The peg lies this far in front of the module (toward the arm), as in the reference."""
 PEG_LATERAL = 0.05
-PEG_HEADING_JITTER = np.pi / 16
-"""The peg lies pointing at the arm (its tip, the end that goes in, toward the arm) within this angle, as in
-the reference (a fixed heading +- pi/16). Lying across, a grasp of its side would turn the hand's long side
-toward the rover's front."""
-PEG_DROP_CLEARANCE = 0.0005
-INSERTED_FRACTION = 0.9
-ALIGNMENT_TOLERANCE = np.radians(5.0)
-LIFT_BAND = (0.05, 0.55)
 
-REWARD_TABLE = RewardTable(
-    (
-        RewardTerm("reach", 1.0, sigma=0.25),
-        RewardTerm("grasp", 4.0),
-        RewardTerm("lift", 8.0, sigma=0.05),
-        RewardTerm("align_axis", 8.0, sigma=0.5),
-        RewardTerm("align_twist", 4.0, sigma=0.2),
-        RewardTerm("entrance", 16.0, sigma=0.05),
-        RewardTerm("bottom", 128.0, sigma=0.005),
-        *PENALTY_TERMS,
-    )
-)
+REWARD_TABLE = RewardTable((*insertion_terms(), *PENALTY_TERMS))
 
 
 @register_env("PegInHoleAssembly-v1", max_episode_steps=200)
@@ -93,7 +76,7 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
         super().__init__(*args, asset_source=asset_source, **kwargs)
 
     def _make_mount(self):
-        return make_station() if self.domain.ground_texture is None else make_rover()
+        return make_rover() if self.domain.has_ground else make_station()
 
     def _load_scene(self, options: dict):
         self._load_domain_scene()
@@ -107,36 +90,26 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
             holes = [load_dataset_object("profile_socket")] * self.num_envs
         self.hole_module = build_actor_per_env(self.scene, holes, "hole_module", body_type="static", initial_pose=sapien.Pose(p=MODULE_POSITION))
         self.hole_assets = holes
-        self.peg = build_samples(self, pegs, "peg")
-        self._store_task_geometry(pegs, holes)
-
-    def _store_task_geometry(self, pegs, holes):
-        """Per-env tensors of the pairs' frames and facts, for batched evaluation and rewards."""
-        device = self.device
+        self.peg = build_dynamic_per_env(self.scene, pegs, "peg")
+        self.peg_assets = pegs
         module = np.eye(4)
         module[:3, 3] = MODULE_POSITION
-        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)  # noqa: E731
-        self._entrance = as_tensor([module @ h.frames["entrance"] for h in holes])
-        self._bottom = as_tensor([module @ h.frames["bottom"] for h in holes])
-        self._depth = as_tensor([h.info["depth"] for h in holes])
-        self._symmetry = torch.as_tensor([p.info["symmetry_order"] for p in pegs], device=device)
-        self._peg_radius = as_tensor([p.info["radius"] for p in pegs])
-        self._peg_height = as_tensor([p.info["height"] for p in pegs])
-        self._peg_ends = as_tensor([[p.frames["end_0"], p.frames.get("end_1", p.frames["end_0"])] for p in pegs])
-        self._peg_end_valid = torch.as_tensor([[True, "end_1" in p.frames] for p in pegs], device=device)
-        # lying on a side: never on an end
-        self._placement = RestingPlacement(pegs, device, exclude_axis=np.array([0.0, 0.0, 1.0]))
+        self.insertion = PegInsertion.from_assets(
+            pegs=[[p] for p in pegs],
+            hole_entrances=[[module @ h.frames["entrance"]] for h in holes],
+            hole_bottoms=[[module @ h.frames["bottom"]] for h in holes],
+            hole_depths=[[h.info["depth"]] for h in holes],
+            symmetry_orders=[[p.info["symmetry_order"]] for p in pegs],
+            device=self.device,
+        )
+        self._placement = peg_placement(pegs, self.device)
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
             b = len(env_idx)
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
-            resting = self._placement.face_down(env_idx, rng.uniform(0.0, 1.0))
-            # turn about z so the lying peg's axis (tip to head) points along the drawn heading, away from the arm
-            axis = quaternion_to_matrix(resting)[:, :, 2]
-            heading = torch.as_tensor(rng.uniform(-PEG_HEADING_JITTER, PEG_HEADING_JITTER), dtype=torch.float32)
-            quat = turned_about_z(resting, heading - torch.atan2(axis[:, 1], axis[:, 0]))
+            quat = lying_peg_orientation(self._placement, env_idx, rng)
             position = torch.zeros((b, 3))
             position[:, 0] = MODULE_POSITION[0] - torch.as_tensor(rng.uniform(*PEG_DISTANCE), dtype=torch.float32)
             position[:, 1] = torch.as_tensor(rng.uniform(-PEG_LATERAL, PEG_LATERAL), dtype=torch.float32)
@@ -149,20 +122,20 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
         self._peg_start_height = torch.zeros(self.num_envs, device=self.device)
 
     def peg_end_frames(self) -> torch.Tensor:
-        """World poses (n, 2, 4, 4) of the peg's insertable ends (the second repeats the first if only one)."""
+        """World poses (n, 1, 2, 4, 4) of the peg's insertable ends (the second repeats the first if only one):
+        ``PegInsertion``'s layout, with one peg."""
         pose = self.peg.pose
-        return pose_matrix(pose.p, pose.q).unsqueeze(1) @ self._peg_ends
+        return self.insertion.end_frames(pose.p[:, None], pose.q[:, None])
 
     def evaluate(self):
-        state = insertion_measures(self.peg_end_frames(), self._peg_end_valid, self._entrance, self._bottom, self._depth, self._symmetry)
-        is_inserted = (state["inserted_fraction"] >= INSERTED_FRACTION) & (state["lateral_offset"] <= self._peg_radius)
-        is_aligned = state["axis_angle"] <= ALIGNMENT_TOLERANCE
+        measures = self.insertion.measures(self.peg_end_frames())
+        inserted, aligned = is_inserted(measures, self.insertion.peg_radius)[:, 0], is_aligned(measures)[:, 0]
         return dict(
-            success=is_inserted & is_aligned,
-            is_inserted=is_inserted,
-            is_aligned=is_aligned,
+            success=inserted & aligned,
+            is_inserted=inserted,
+            is_aligned=aligned,
             is_grasped=self.is_grasping(self.peg),
-            **state,
+            **{name: value[:, 0] for name, value in measures.items()},
         )
 
     def _get_obs_extra(self, info: dict):
@@ -172,38 +145,24 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
         if self.obs_mode_struct.use_state:
             peg = self.peg.pose
             position, rotation = relative_pose(tcp_position, tcp_rotation, peg.p, rotation_matrix(peg.q))
-            end = _select(self.peg_end_frames(), info["peg_end"])
+            end = _select(self.peg_end_frames()[:, 0], info["peg_end"])
             end_position, end_rotation = end[:, :3, 3], end[:, :3, :3]
-            entrance, _ = relative_pose(end_position, end_rotation, self._entrance[:, :3, 3], self._entrance[:, :3, :3])
-            bottom, hole_rotation = relative_pose(end_position, end_rotation, self._bottom[:, :3, 3], self._bottom[:, :3, :3])
+            hole_entrance, hole_bottom = self.insertion.hole_entrance[:, 0], self.insertion.hole_bottom[:, 0]
+            entrance, _ = relative_pose(end_position, end_rotation, hole_entrance[:, :3, 3], hole_entrance[:, :3, :3])
+            bottom, hole_rotation = relative_pose(end_position, end_rotation, hole_bottom[:, :3, 3], hole_bottom[:, :3, :3])
             obs.update(
                 peg_pos_in_tcp=position,
                 peg_rot6d_in_tcp=rotation_6d(rotation),
                 entrance_in_peg_end=entrance,
                 bottom_in_peg_end=bottom,
                 hole_rot6d_in_peg_end=rotation_6d(hole_rotation),
-                hole_depth=self._depth.unsqueeze(-1),
-                symmetry_order=self._symmetry.float().unsqueeze(-1),
+                hole_depth=self.insertion.hole_depth,
+                symmetry_order=self.insertion.symmetry_order.float(),
             )
         return obs
 
     def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
-        peg = self.peg.pose.p
-        return dict(
-            reach=torch.linalg.norm(self.agent.tcp.pose.p - peg, dim=-1),
-            grasp=info["is_grasped"],
-            lift=band_distance(peg[:, 2] - self._peg_start_height, *LIFT_BAND),
-            align_axis=1.0 - torch.cos(info["axis_angle"]),
-            align_twist=info["twist_error"],
-            entrance=info["tip_to_entrance"],
-            bottom=info["tip_to_bottom"],
-        )
-
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
-
-    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
+        return insertion_inputs(self.agent.tcp.pose.p, self.peg.pose.p, info["is_grasped"], self._peg_start_height, info)
 
 
 def _select(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:

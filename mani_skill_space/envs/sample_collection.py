@@ -1,12 +1,11 @@
-from typing import Any
-
 import numpy as np
 import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, build_samples, turned_about_z
+from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, turned_about_z
+from mani_skill_space.envs.building import build_dynamic_per_env
 from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover
 from mani_skill_space.procgen.rock import make_rock
@@ -76,7 +75,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
         else:
             assets = [load_dataset_object("sample_tube")] * self.num_envs
-        self.sample = build_samples(self, assets, "sample")
+        self.sample = build_dynamic_per_env(self.scene, assets, "sample")
         # a tube lies flat: it never rests on its end caps
         self._placement = RestingPlacement(assets, self.device, exclude_axis=np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None)
         bin_frame = self.mount.frames["bin"]
@@ -142,9 +141,3 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             lift=band_distance(lift, *LIFT_BAND),
             transport=torch.linalg.norm(self.bin_target - sample, dim=-1),
         )
-
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
-
-    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))

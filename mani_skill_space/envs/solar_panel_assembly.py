@@ -1,4 +1,4 @@
-from typing import Any, Optional
+from typing import Optional
 
 import numpy as np
 import sapien
@@ -8,16 +8,20 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import (
-    PENALTY_TERMS,
-    RestingPlacement,
-    SpaceManipulationEnv,
-    build_samples,
-    socket_clearance,
-    turned_about_z,
+from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
+from mani_skill_space.envs.building import build_actor_per_env, build_dynamic_per_env
+from mani_skill_space.envs.insertion import (
+    INSERTION_VALUE,
+    PEG_DROP_CLEARANCE,
+    PegInsertion,
+    insertion_inputs,
+    insertion_terms,
+    is_aligned,
+    is_inserted,
+    lying_peg_orientation,
+    peg_placement,
 )
-from mani_skill_space.envs.building import build_actor_per_env
-from mani_skill_space.geometry import insertion_measures, pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.geometry import pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
 from mani_skill_space.procgen.solar_panel import (
     LONG_SOCKETS,
@@ -43,30 +47,16 @@ PEG_REST_XY = ((0.34, 0.36), (0.34, -0.36), (0.34, 0.05), (0.34, -0.05))
 """Where each socket's peg lies (socket order: long, long, short, short): in front of the arm, the long pegs
 outside the short ones."""
 PEG_JITTER = 0.01
-PEG_HEADING_JITTER = np.pi / 16
-PEG_DROP_CLEARANCE = 0.0005
-INSERTED_FRACTION = 0.9
-ALIGNMENT_TOLERANCE = np.radians(5.0)
 SEAT_DISTANCE_TOLERANCE = 0.01
 SEAT_ANGLE_TOLERANCE = np.radians(5.0)
-PEG_LIFT_BAND = (0.05, 0.55)
 PANEL_LIFT_BAND = (0.03, 0.5)
 SOCKET_COUNT = len(SOCKET_OFFSETS)
 
-PEG_TERMS = (
-    RewardTerm("peg_reach", 1.0, sigma=0.25),
-    RewardTerm("peg_grasp", 4.0),
-    RewardTerm("peg_lift", 8.0, sigma=0.05),
-    RewardTerm("peg_align_axis", 8.0, sigma=0.5),
-    RewardTerm("peg_align_twist", 4.0, sigma=0.2),
-    RewardTerm("peg_entrance", 16.0, sigma=0.05),
-    RewardTerm("peg_bottom", 128.0, sigma=0.005),
-)
+PEG_TERMS = insertion_terms(prefix="peg_")
 """Peg-in-Hole's terms, for the peg nearest to going in."""
-PEG_STAGE_VALUE = sum(t.weight for t in PEG_TERMS)
 REWARD_TABLE = RewardTable(
     (
-        RewardTerm("pegs_inserted", SOCKET_COUNT * PEG_STAGE_VALUE),
+        RewardTerm("pegs_inserted", SOCKET_COUNT * INSERTION_VALUE),
         *PEG_TERMS,
         RewardTerm("panel_reach", 4.0, sigma=0.25),
         RewardTerm("panel_grasp", 8.0),
@@ -112,7 +102,8 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     weights: reach 4/0.25, grasp 8, lift 16/0.05, place 512/0.05, and orientation 64/0.1 rad). A grasp or
     lift counts as done once the panel is seated, so releasing it loses nothing. `info["stage"]` counts
     completed stages: 0-4 sockets filled, then panel grasped, lifted, seated, released (8 = success).
-    Success gives the maximum (1360); `normalized_dense` maps [-1.5, 1360] onto [0, 1].
+    Success gives the table's maximum (1449: every term's weight, the peg terms' 169 included);
+    `normalized_dense` maps [-1.5, 1449] onto [0, 1].
     """
 
     SUPPORTED_DOMAINS = ("moon", "mars", "orbit", "earth")
@@ -125,12 +116,12 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         super().__init__(*args, asset_source=asset_source, **kwargs)
 
     def _make_mount(self):
-        return make_station() if self.domain.ground_texture is None else make_rover(cargo_bin=False)
+        return make_rover(cargo_bin=False) if self.domain.has_ground else make_station()
 
     @property
     def deck_height(self) -> float:
         """Height of the surface the panel starts on."""
-        return 0.0 if self.domain.ground_texture is None else DECK_HEIGHT
+        return DECK_HEIGHT if self.domain.has_ground else 0.0
 
     def _load_scene(self, options: dict):
         self._load_domain_scene()
@@ -148,8 +139,8 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         self.socket_base = build_actor_per_env(self.scene, bases, "socket_base", body_type="static", initial_pose=target)
         self.socket_assets = bases
         self.peg_assets = pegs
-        self.pegs = [build_samples(self, [p[i] for p in pegs], f"peg_{i}") for i in range(SOCKET_COUNT)]
-        self.panel = build_samples(self, panels, "panel")
+        self.pegs = [build_dynamic_per_env(self.scene, [p[i] for p in pegs], f"peg_{i}") for i in range(SOCKET_COUNT)]
+        self.panel = build_dynamic_per_env(self.scene, panels, "panel")
         self.panel_assets = panels
         self._store_task_geometry(pegs, bases, panels)
 
@@ -158,20 +149,21 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)  # noqa: E731
         origin = np.eye(4)
         origin[:2, 3] = PANEL_TARGET_XY
-        self._entrance = as_tensor([[origin @ b.frames[f"entrance_{i}"] for i in range(SOCKET_COUNT)] for b in bases])
-        self._bottom = as_tensor([[origin @ b.frames[f"bottom_{i}"] for i in range(SOCKET_COUNT)] for b in bases])
-        self._depth = as_tensor([b.info["depth"] for b in bases])
-        self._symmetry = torch.as_tensor([b.info["symmetry_order"] for b in bases], device=device)
-        self._peg_radius = as_tensor([[p.info["radius"] for p in env_pegs] for env_pegs in pegs])
-        self._peg_height = as_tensor([[p.info["height"] for p in env_pegs] for env_pegs in pegs])
-        self._peg_ends = as_tensor([[[p.frames["end_0"], p.frames.get("end_1", p.frames["end_0"])] for p in env_pegs] for env_pegs in pegs])
-        self._peg_end_valid = torch.as_tensor([[[True, "end_1" in p.frames] for p in env_pegs] for env_pegs in pegs], device=device)
+        sockets = range(SOCKET_COUNT)
+        self.insertion = PegInsertion.from_assets(
+            pegs=pegs,
+            hole_entrances=[[origin @ b.frames[f"entrance_{i}"] for i in sockets] for b in bases],
+            hole_bottoms=[[origin @ b.frames[f"bottom_{i}"] for i in sockets] for b in bases],
+            hole_depths=[[b.info["depth"]] * SOCKET_COUNT for b in bases],
+            symmetry_orders=[[b.info["symmetry_order"]] * SOCKET_COUNT for b in bases],
+            device=device,
+        )
         self._seat_in_panel = as_tensor([p.frames["seat"] for p in panels])
         self._handle_in_panel = as_tensor([p.frames["handle"] for p in panels])
         target = np.eye(4)
         target[:3, 3] = (*PANEL_TARGET_XY, SEAT_HEIGHT)
-        self._panel_target = as_tensor([target] * self.num_envs)
-        self._peg_placements = [RestingPlacement([p[i] for p in pegs], device, exclude_axis=np.array([0.0, 0.0, 1.0])) for i in range(SOCKET_COUNT)]
+        self.panel_target = as_tensor([target] * self.num_envs)
+        self._peg_placements = [peg_placement([p[i] for p in pegs], device) for i in sockets]
         self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
         # the sockets each peg may fill: those of its length
         self._fits = self._socket_class[:, None] == self._socket_class[None, :]
@@ -187,10 +179,7 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
             for i, (peg, placement) in enumerate(zip(self.pegs, self._peg_placements)):
-                resting = placement.face_down(env_idx, rng.uniform(0.0, 1.0))
-                axis = quaternion_to_matrix(resting)[:, :, 2]
-                heading = torch.as_tensor(rng.uniform(-PEG_HEADING_JITTER, PEG_HEADING_JITTER), dtype=torch.float32)
-                quat = turned_about_z(resting, heading - torch.atan2(axis[:, 1], axis[:, 0]))
+                quat = lying_peg_orientation(placement, env_idx, rng)
                 position = torch.zeros((b, 3))
                 position[:, :2] = torch.tensor(PEG_REST_XY[i]) + torch.as_tensor(rng.uniform(-PEG_JITTER, PEG_JITTER, size=(2,)), dtype=torch.float32)
                 position[:, 2] = placement.height_on_ground(env_idx, quat, PEG_DROP_CLEARANCE)
@@ -211,8 +200,9 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     # ------------------------------------------------------------------ measures
     def peg_end_frames(self) -> torch.Tensor:
         """World poses (n, 4 pegs, 2 ends, 4, 4) of the pegs' insertable ends (the second repeats the first if only one)."""
-        poses = torch.stack([pose_matrix(peg.pose.p, peg.pose.q) for peg in self.pegs], dim=1)
-        return poses.unsqueeze(2) @ self._peg_ends
+        positions = torch.stack([peg.pose.p for peg in self.pegs], dim=1)
+        quaternions = torch.stack([peg.pose.q for peg in self.pegs], dim=1)
+        return self.insertion.end_frames(positions, quaternions)
 
     def panel_seat(self) -> torch.Tensor:
         pose = self.panel.pose
@@ -222,33 +212,13 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         pose = self.panel.pose
         return pose_matrix(pose.p, pose.q) @ self._handle_in_panel
 
-    def _peg_socket_measures(self) -> dict[str, torch.Tensor]:
-        """Peg-in-Hole's measures for every (peg, socket) pair, each (n, 4 pegs, 4 sockets)."""
-        n, count = self.num_envs, SOCKET_COUNT
-        ends = self.peg_end_frames()[:, :, None].expand(n, count, count, 2, 4, 4)
-        valid = self._peg_end_valid[:, :, None].expand(n, count, count, 2)
-        entrance = self._entrance[:, None].expand(n, count, count, 4, 4)
-        bottom = self._bottom[:, None].expand(n, count, count, 4, 4)
-        depth = self._depth[:, None, None].expand(n, count, count)
-        symmetry = self._symmetry[:, None, None].expand(n, count, count)
-        flat = insertion_measures(
-            ends.reshape(-1, 2, 4, 4), valid.reshape(-1, 2), entrance.reshape(-1, 4, 4), bottom.reshape(-1, 4, 4), depth.reshape(-1), symmetry.reshape(-1)
-        )
-        return {k: v.reshape(n, count, count) for k, v in flat.items()}
-
     def evaluate(self):
-        measures = self._peg_socket_measures()
-        radius = self._peg_radius[:, :, None]
-        in_socket = (
-            (measures["inserted_fraction"] >= INSERTED_FRACTION)
-            & (measures["lateral_offset"] <= radius)
-            & (measures["axis_angle"] <= ALIGNMENT_TOLERANCE)
-            & self._fits
-        )
+        measures = self.insertion.all_pair_measures(self.peg_end_frames())
+        in_socket = is_inserted(measures, self.insertion.peg_radius[:, :, None]) & is_aligned(measures) & self._fits
         socket_filled = in_socket.any(dim=1)
         sockets_filled = socket_filled.sum(dim=1)
         all_filled = sockets_filled == SOCKET_COUNT
-        seat_distance, seat_angle = pose_error(self.panel_seat(), self._panel_target, half_turn_symmetric=True)
+        seat_distance, seat_angle = pose_error(self.panel_seat(), self.panel_target, half_turn_symmetric=True)
         panel_seated = (seat_distance <= SEAT_DISTANCE_TOLERANCE) & (seat_angle <= SEAT_ANGLE_TOLERANCE)
         panel_grasped = self.is_grasping(self.panel)
         panel_lift = self.panel_seat()[:, 2, 3] - self._panel_start_height
@@ -288,18 +258,19 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
             peg_position, peg_rotation = relative_pose(
                 tcp_position[:, None], tcp_rotation[:, None], pegs[..., :3], rotation_matrix(pegs[..., 3:])
             )
-            entrance_position, _ = relative_pose(tcp_position[:, None], tcp_rotation[:, None], self._entrance[..., :3, 3], self._entrance[..., :3, :3])
+            entrance = self.insertion.hole_entrance
+            entrance_position, _ = relative_pose(tcp_position[:, None], tcp_rotation[:, None], entrance[..., :3, 3], entrance[..., :3, :3])
             handle = self.panel_handle()
             handle_position, handle_rotation = relative_pose(tcp_position, tcp_rotation, handle[:, :3, 3], handle[:, :3, :3])
             seat = self.panel_seat()
-            target_position, target_rotation = relative_pose(seat[:, :3, 3], seat[:, :3, :3], self._panel_target[:, :3, 3], self._panel_target[:, :3, :3])
+            target_position, target_rotation = relative_pose(seat[:, :3, 3], seat[:, :3, :3], self.panel_target[:, :3, 3], self.panel_target[:, :3, :3])
             obs.update(
                 pegs_pos_in_tcp=peg_position.reshape(n, -1),
                 pegs_rot6d_in_tcp=rotation_6d(peg_rotation).reshape(n, -1),
                 sockets_pos_in_tcp=entrance_position.reshape(n, -1),
                 peg_inserted=info["peg_inserted"].float(),
-                socket_depth=self._depth.unsqueeze(-1),
-                symmetry_order=self._symmetry.float().unsqueeze(-1),
+                socket_depth=self.insertion.hole_depth[:, :1],
+                symmetry_order=self.insertion.symmetry_order[:, :1].float(),
                 handle_pos_in_tcp=handle_position,
                 handle_rot6d_in_tcp=rotation_6d(handle_rotation),
                 target_pos_in_seat=target_position,
@@ -333,15 +304,9 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         pair = lambda key: info[f"pair_{key}"][rows, torch.arange(SOCKET_COUNT, device=self.device)[None], target]  # noqa: E731
         positions = torch.stack([peg.pose.p for peg in self.pegs], dim=1)
         grasped = torch.stack([self.is_grasping(peg) for peg in self.pegs], dim=1)
-        inputs = dict(
-            peg_reach=torch.linalg.norm(self.agent.tcp.pose.p[:, None] - positions, dim=-1),
-            peg_grasp=grasped.float(),
-            peg_lift=band_distance(positions[..., 2] - self._peg_start_height, *PEG_LIFT_BAND),
-            peg_align_axis=1.0 - torch.cos(pair("axis_angle")),
-            peg_align_twist=pair("twist_error"),
-            peg_entrance=pair("tip_to_entrance"),
-            peg_bottom=pair("tip_to_bottom"),
-        )
+        measures = {key: pair(key) for key in ("axis_angle", "twist_error", "tip_to_entrance", "tip_to_bottom")}
+        inputs = insertion_inputs(self.agent.tcp.pose.p[:, None], positions, grasped.float(), self._peg_start_height, measures)
+        inputs = {f"peg_{name}": value for name, value in inputs.items()}
         progress = sum(term(inputs[term.name]) for term in PEG_TERMS)
         progress = progress.masked_fill(info["peg_inserted"], -1.0)
         best = progress.argmax(dim=1)
@@ -349,12 +314,6 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         # once all four are in, the peg terms rest at zero
         off = {"peg_grasp": torch.zeros(n, device=self.device)}
         return {name: torch.where(all_filled, off.get(name, torch.full_like(value, float("inf"))), value) for name, value in chosen.items()}
-
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.dense(info["reward_terms"], info["success"])
-
-    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
 
 
 _DATASET_LAYOUT = dataset_layout(short_length=0.1, width=0.02, clearance=0.001, depth=0.02)

@@ -47,6 +47,10 @@ class Oracle(Policy):
     """(metres, radians): where set, every motion is retimed to move the TCP target this far per control step (or
     turn it this far, whichever comes first), a pace ``pd_ee_delta_pose`` (0.1 m / 0.1 rad per step, less its PD
     lag) follows step for step: the demonstrations then convert to it without stretching."""
+    path_check_step: Optional[float] = None
+    """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
+    its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
+    swing."""
 
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
@@ -96,6 +100,10 @@ class Oracle(Policy):
         solver.use_point_cloud = True
         self.solver = solver
         return solver
+
+    def tcp_pose(self) -> sapien.Pose:
+        """The TCP's world pose now."""
+        return self.env.agent.tcp.pose.sp
 
     def arm_qpos(self) -> np.ndarray:
         return self.env.agent.controller.controllers["arm"].qpos[0].cpu().numpy()
@@ -208,6 +216,9 @@ class Oracle(Policy):
         return float(np.min(np.minimum(qpos - limits[:, 0], limits[:, 1] - qpos)))
 
     def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
+        if self.path_check_step is not None:
+            steps = int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / self.path_check_step))
+            samples = max(samples, steps + 1)
         planner = self.solver.planner
         for t in np.linspace(0.0, 1.0, samples):
             qpos = planner.pad_qpos(start + t * (goal - start))
@@ -285,6 +296,21 @@ def _trapezoid(distance: float, ramp_steps: int) -> np.ndarray:
         half.append(min(1.0, (len(half) + 1) / ramp_steps))
     advances = np.array(half + half[::-1])
     return advances * distance / advances.sum()
+
+
+def backed_off(pose: sapien.Pose, distance: float) -> sapien.Pose:
+    """``pose`` moved back along its approach direction (TCP z)."""
+    return pose * sapien.Pose([0.0, 0.0, -distance])
+
+
+def raised(pose: sapien.Pose, height: float) -> sapien.Pose:
+    """``pose`` moved straight up by ``height`` (straight out of a vertical socket, whatever the hand's tilt)."""
+    return sapien.Pose(pose.p + np.array([0.0, 0.0, height]), pose.q)
+
+
+def at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
+    """``pose`` moved vertically to ``height`` (world z)."""
+    return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
 
 
 def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:

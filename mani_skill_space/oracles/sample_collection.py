@@ -7,7 +7,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, top_down_grasp_pose
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, at_height, raised, top_down_grasp_pose
 
 PRE_GRASP_HEIGHT = 0.06
 SETTLE_STEPS = 3
@@ -38,10 +38,10 @@ class SampleCollectionOracle(Oracle):
         self.make_solver(env)
         grasp = top_down_grasp_pose(env, env.sample)
         grasp = sapien.Pose([grasp.p[0], grasp.p[1], max(grasp.p[2], 0.012)], grasp.q)
-        yield from self.screw_to(_raised(grasp, PRE_GRASP_HEIGHT), "pre-grasp")
+        yield from self.screw_to(raised(grasp, PRE_GRASP_HEIGHT), "pre-grasp")
         yield from self.screw_to(grasp, "grasp", settle_steps=SETTLE_STEPS)
         yield from self.set_gripper(GRIPPER_CLOSED)
-        yield from self.screw_to(_at_height(grasp, LIFT_HEIGHT), "lift")
+        yield from self.screw_to(at_height(grasp, LIFT_HEIGHT), "lift")
 
         over_bin, release, goal = self._bin_approach(env, side=1.0 if grasp.p[1] >= 0 else -1.0)
         yield from self.joint_move(goal, "over-bin")
@@ -74,14 +74,6 @@ class SampleCollectionOracle(Oracle):
             if self.path_is_free(start, goal) and self.screw_is_feasible(goal, release):
                 return over_bin, release, goal
         raise PlanningFailed("cannot reach over the bin and lower the sample into it")
-
-
-def _raised(pose: sapien.Pose, height: float) -> sapien.Pose:
-    return sapien.Pose(pose.p + np.array([0.0, 0.0, height]), pose.q)
-
-
-def _at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
-    return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
 
 
 def _tcp_heading(env) -> float:

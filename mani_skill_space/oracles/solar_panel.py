@@ -1,6 +1,6 @@
 """Oracle for SolarPanelAssembly-v1.
 
-Chains the Peg-in-Hole oracle four times (the farther, short sockets first, so that the arm never reaches
+Chains the shared peg insertion (``oracles.insertion``) four times (the farther, short sockets first, so that the arm never reaches
 over an inserted peg to get to a socket), letting go of each peg and backing away from it before the next.
 Then it takes the panel's grasp bar from above, lifts the panel straight up, swings it over the target with
 its receptacles above the pegs' tops, lowers it onto them (re-measuring the panel in the hand on the way, as
@@ -14,8 +14,8 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, PlanningFailed, surface_points
-from mani_skill_space.oracles.peg_in_hole import SETTLE_STEPS, PegInHoleOracle, PegTarget, _backed_off, outside_keepout
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
+from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, outside_keepout
 
 INSERTION_ORDER = (2, 3, 0, 1)
 """Sockets in the order they are filled: the farther (short) ones first."""
@@ -27,7 +27,6 @@ PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
 STILL_IN_FRACTION = 0.8
-PATH_CHECK_STEP = 0.02
 PANEL_PRE_GRASP = 0.1
 PANEL_LIFT = 0.3
 """How far (m) the panel goes straight up off the deck before swinging round."""
@@ -37,22 +36,24 @@ PLACE_STEP = 0.004
 PLACE_PRESS = 0.004
 
 
-class SolarPanelOracle(PegInHoleOracle):
-    lift_height = PEG_LIFT_HEIGHT
-    relax_steps = 6
-    insert_attempts = 2
-    insert_step = 0.004
-    refine_passes = 1
-    """Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg."""
-    """In orbit a peg let go while pressed into its socket springs back out of it."""
+PEG_INSERTION = InsertionSettings(lift_height=PEG_LIFT_HEIGHT, relax_steps=6, insert_attempts=2, insert_step=0.004, refine_passes=1)
+"""Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg; the push eases off before
+letting go (in orbit a peg let go while pressed into its socket springs back out of it), and a jammed push is
+tried again."""
+
+
+class SolarPanelOracle(Oracle):
+    path_check_step = 0.02
+    """Inserted pegs are thin and stand up high: a check at 20 points of a long swing can step over one."""
 
     def plan(self, env) -> Iterator[np.ndarray]:
+        inserter = PegInserter(self, PEG_INSERTION)
         for socket in INSERTION_ORDER:
-            target = self._peg_target(env, socket)
+            target = PegTarget.of(env, env.pegs[socket], socket)
             self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket, target=target))
-            yield from self.insert(target)
+            yield from inserter.insert(target)
             yield from self.open_gently(8)
-            yield from self.screw_to(_raised(self._tcp(), RETREAT_DISTANCE), "retreat")
+            yield from self.screw_to(raised(self.tcp_pose(), RETREAT_DISTANCE), "retreat")
             # let go, a peg may lean in its socket's clearance (or, in orbit, drift to a lean): the panel's
             # funnels right it; only a peg that has come out is a failure
             if float(env.evaluate()["pair_inserted_fraction"][0, socket, socket]) < STILL_IN_FRACTION:
@@ -60,24 +61,6 @@ class SolarPanelOracle(PegInHoleOracle):
         self.make_solver(env, obstacles=self._obstacles(env))
         yield from self.place_panel(env)
         yield from self.wait_for_success(20)
-
-    def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
-        """Checked every PATH_CHECK_STEP radians at least: inserted pegs are thin and stand up high, and a check
-        at 20 points of a long swing can step over one."""
-        steps = int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / PATH_CHECK_STEP))
-        return super().path_is_free(start, goal, max(samples, steps + 1))
-
-    def _peg_target(self, env, socket: int) -> PegTarget:
-        return PegTarget(
-            peg=env.pegs[socket],
-            end_frames=lambda: env.peg_end_frames()[0, socket].cpu().numpy().astype(np.float64),
-            end_valid=env._peg_end_valid[0, socket].cpu().numpy(),
-            bottom=env._bottom[0, socket].cpu().numpy().astype(np.float64),
-            depth=float(env._depth[0]),
-            symmetry=int(env._symmetry[0]),
-            radius=float(env._peg_radius[0, socket]),
-            height=float(env._peg_height[0, socket]),
-        )
 
     def _obstacles(self, env, exclude_peg: int = -1, target: PegTarget = None) -> np.ndarray:
         """The socket posts (less the keep-out around the target's axis), the other pegs where they are now and
@@ -97,11 +80,11 @@ class SolarPanelOracle(PegInHoleOracle):
     # ------------------------------------------------------------------ panel
     def place_panel(self, env) -> Iterator[np.ndarray]:
         grasp = self._panel_grasp(env)
-        yield from self.screw_to(_backed_off(grasp, PANEL_PRE_GRASP), "panel pre-grasp")
+        yield from self.screw_to(backed_off(grasp, PANEL_PRE_GRASP), "panel pre-grasp")
         yield from self.screw_to(grasp, "panel grasp", SETTLE_STEPS)
         yield from self.set_gripper(GRIPPER_CLOSED)
         yield from self.wait_for_grasp(env.panel, "the panel's bar")
-        yield from self.screw_to(_raised(self._tcp(), PANEL_LIFT), "panel lift")
+        yield from self.screw_to(raised(self.tcp_pose(), PANEL_LIFT), "panel lift")
 
         arm = self._over_target(env)
         yield from self.joint_move(arm, "over the target")
@@ -111,14 +94,14 @@ class SolarPanelOracle(PegInHoleOracle):
         height = lambda step: max(-PLACE_PRESS, PLACE_GAP - (step + 1) * PLACE_STEP)  # noqa: E731
         yield from self.servo(lambda step: self._tcp_for_seat(env, height(step)), steps + SETTLE_STEPS, "lower the panel")
         yield from self.open_gently(8)
-        yield from self.screw_to(_raised(self._tcp(), RETREAT_DISTANCE), "retreat")
+        yield from self.screw_to(raised(self.tcp_pose(), RETREAT_DISTANCE), "retreat")
 
     def _panel_grasp(self, env) -> sapien.Pose:
         """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches."""
         handle = env.panel_handle()[0].cpu().numpy().astype(np.float64)
         for sign in (1.0, -1.0):
             pose = env.agent.build_grasp_pose(np.array([0.0, 0.0, -1.0]), sign * handle[:3, 0], handle[:3, 3])
-            if self.ik_solutions(pose) and self.ik_solutions(_backed_off(pose, PANEL_PRE_GRASP)):
+            if self.ik_solutions(pose) and self.ik_solutions(backed_off(pose, PANEL_PRE_GRASP)):
                 return pose
         raise PlanningFailed("the arm cannot reach down to the panel's bar")
 
@@ -136,17 +119,12 @@ class SolarPanelOracle(PegInHoleOracle):
         """The TCP pose that puts the panel's seat ``height`` above its target, given how the hand holds the panel
         now; the target turned by the half turn nearer the panel's heading unless ``half_turns`` says."""
         seat = env.panel_seat()[0].cpu().numpy().astype(np.float64)
-        target = env._panel_target[0].cpu().numpy().astype(np.float64)
+        target = env.panel_target[0].cpu().numpy().astype(np.float64)
         if half_turns is None:
             half_turns = int(seat[:3, 0] @ target[:3, 0] < 0)
         if half_turns:
             target = target @ np.diag([-1.0, -1.0, 1.0, 1.0])
         goal = target.copy()
         goal[2, 3] += height
-        seat_in_tcp = np.linalg.inv(self._tcp().to_transformation_matrix()) @ seat
+        seat_in_tcp = np.linalg.inv(self.tcp_pose().to_transformation_matrix()) @ seat
         return sapien.Pose(goal @ np.linalg.inv(seat_in_tcp))
-
-
-def _raised(pose: sapien.Pose, height: float) -> sapien.Pose:
-    """``pose`` moved straight up by ``height`` (straight out of a vertical socket, whatever the hand's tilt)."""
-    return sapien.Pose(pose.p + np.array([0.0, 0.0, height]), pose.q)

@@ -85,7 +85,7 @@ def test_peg_starts_at_rest_lying_in_front_of_the_module(asset_source):
             for _ in range(20):
                 env.step(torch.zeros(1, 7))
             assert torch.linalg.norm(u.peg.pose.p - start[:, :3]).item() < 0.005, (domain, seed)
-            tip = u.peg_end_frames()[0, 0]
+            tip = u.peg_end_frames()[0, 0, 0]
             assert abs(tip[2, 2].item()) < 0.35  # lying: the axis is roughly horizontal
             assert 0.24 - 0.005 <= MODULE_POSITION[0] - u.peg.pose.p[0, 0].item() <= 0.28 + 0.005
         env.close()
@@ -94,13 +94,13 @@ def test_peg_starts_at_rest_lying_in_front_of_the_module(asset_source):
 def _place_peg(env, height: float, twist: float = 0.0, tilt: float = 0.0, end: int = 0):
     """Put the peg's ``end`` on the hole's axis ``height`` above the bottom, turned and tilted."""
     u = env.unwrapped
-    bottom = u._bottom[0].numpy().astype(np.float64)
+    bottom = u.insertion.hole_bottom[0, 0].numpy().astype(np.float64)
     c, s = np.cos(twist), np.sin(twist)
     turn = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, height], [0, 0, 0, 1.0]])
     ct, st = np.cos(tilt), np.sin(tilt)
     lean = np.array([[1, 0, 0, 0], [0, ct, -st, 0], [0, st, ct, 0], [0, 0, 0, 1.0]])
     goal = bottom @ turn @ lean
-    peg_pose = goal @ np.linalg.inv(u._peg_ends[0, end].numpy().astype(np.float64))
+    peg_pose = goal @ np.linalg.inv(u.insertion.peg_ends[0, 0, end].numpy().astype(np.float64))
     u.peg.set_pose(sapien.Pose(peg_pose))
     return u.evaluate()
 
@@ -110,8 +110,8 @@ def test_success_needs_depth_and_alignment(asset_source):
     env = make(asset_source=asset_source)
     env.reset(seed=2)
     u = env.unwrapped
-    depth = u._depth[0].item()
-    order = int(u._symmetry[0])
+    depth = u.insertion.hole_depth[0, 0].item()
+    order = int(u.insertion.symmetry_order[0, 0])
     assert _place_peg(env, 0.0)["success"].item()
     assert _place_peg(env, 0.05 * depth)["success"].item()
     assert not _place_peg(env, 0.2 * depth)["success"].item()  # only 80% in
@@ -141,10 +141,10 @@ def test_success_gives_the_maximum_reward_and_normalised_is_in_the_unit_interval
 def test_same_seed_same_pair_and_initial_state():
     a, b = make(), make()
     a.reset(seed=5), b.reset(seed=5)
-    torch.testing.assert_close(a.unwrapped._bottom, b.unwrapped._bottom, rtol=0, atol=0)
+    torch.testing.assert_close(a.unwrapped.insertion.hole_bottom, b.unwrapped.insertion.hole_bottom, rtol=0, atol=0)
     torch.testing.assert_close(a.unwrapped.peg.pose.raw_pose, b.unwrapped.peg.pose.raw_pose, rtol=0, atol=0)
     b.reset(seed=6)
-    assert not torch.equal(a.unwrapped._bottom, b.unwrapped._bottom)
+    assert not torch.equal(a.unwrapped.insertion.hole_bottom, b.unwrapped.insertion.hole_bottom)
     a.close(), b.close()
 
 

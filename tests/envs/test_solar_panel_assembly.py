@@ -85,14 +85,14 @@ def test_pegs_and_panel_start_at_rest_where_they_belong(domain):
 def _insert(env, socket: int, peg: int = None, lift: float = 0.0):
     u = env.unwrapped
     peg = socket if peg is None else peg
-    goal = u._bottom[0, socket].numpy().astype(np.float64).copy()
+    goal = u.insertion.hole_bottom[0, socket].numpy().astype(np.float64).copy()
     goal[2, 3] += 1e-4 + lift
-    u.pegs[peg].set_pose(sapien.Pose(goal @ np.linalg.inv(u._peg_ends[0, peg, 0].numpy().astype(np.float64))))
+    u.pegs[peg].set_pose(sapien.Pose(goal @ np.linalg.inv(u.insertion.peg_ends[0, peg, 0].numpy().astype(np.float64))))
 
 
 def _place_panel(env, offset=(0.0, 0.0, 0.0), yaw: float = 0.0):
     u = env.unwrapped
-    goal = u._panel_target[0].numpy().astype(np.float64).copy()
+    goal = u.panel_target[0].numpy().astype(np.float64).copy()
     c, s = np.cos(yaw), np.sin(yaw)
     goal[:3, :3] = goal[:3, :3] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     goal[:3, 3] += np.array(offset) + [0.0, 0.0, 1e-4]
@@ -121,7 +121,7 @@ def test_success_needs_four_pegs_in_and_the_panel_seated(asset_source):
     _place_panel(env, yaw=np.radians(8))
     assert not u.evaluate()["success"].item()
     _place_panel(env)
-    _insert(env, 1, lift=0.5 * u._depth[0].item())  # half way out
+    _insert(env, 1, lift=0.5 * u.insertion.hole_depth[0, 0].item())  # half way out
     info = u.evaluate()
     assert not info["success"].item() and info["socket_filled"][0].tolist() == [True, False, True, True]
     # pegs of one length may swap sockets; a short peg in a long peg's socket does not count
@@ -202,12 +202,12 @@ def test_seated_panel_stays_on_the_pegs():
 def test_same_seed_same_assets_and_initial_state():
     a, b = make(), make()
     a.reset(seed=5), b.reset(seed=5)
-    for key in ("_bottom", "_seat_in_panel"):
-        torch.testing.assert_close(getattr(a.unwrapped, key), getattr(b.unwrapped, key), rtol=0, atol=0)
+    torch.testing.assert_close(a.unwrapped.insertion.hole_bottom, b.unwrapped.insertion.hole_bottom, rtol=0, atol=0)
+    torch.testing.assert_close(a.unwrapped._seat_in_panel, b.unwrapped._seat_in_panel, rtol=0, atol=0)
     for pa, pb in zip(a.unwrapped.pegs + [a.unwrapped.panel], b.unwrapped.pegs + [b.unwrapped.panel]):
         torch.testing.assert_close(pa.pose.raw_pose, pb.pose.raw_pose, rtol=0, atol=0)
     b.reset(seed=6)
-    assert not torch.equal(a.unwrapped._bottom, b.unwrapped._bottom)
+    assert not torch.equal(a.unwrapped.insertion.hole_bottom, b.unwrapped.insertion.hole_bottom)
     a.close(), b.close()
 
 

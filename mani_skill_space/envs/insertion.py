@@ -1,0 +1,172 @@
+"""Peg insertion, shared by PegInHoleAssembly-v1 and SolarPanelAssembly-v1 and by their oracles.
+
+Both tasks hold ``k`` pegs and ``k`` holes per env (Peg-in-Hole: one of each; Solar Panel: four pegs and the
+four sockets of the base) in a ``PegInsertion``: batched tensors with a leading ``num_envs`` dim, then the
+peg or hole index. Its frames are public and documented, so that rewards, success and the oracles all read
+the same geometry:
+
+- ``hole_entrance`` and ``hole_bottom`` (n, k, 4, 4): world poses of each hole's mouth and floor, z pointing
+  out of the hole, x the profile's reference direction; ``hole_depth`` (n, k) is the distance between them.
+- ``peg_ends`` (n, k, 2, 4, 4): poses of each peg's insertable ends in the peg's own frame, z pointing into
+  the peg, x the profile's reference direction; ``peg_end_valid`` (n, k, 2) says which exist (a tapered peg
+  goes in by its narrow end only; the second slot then repeats the first).
+- ``symmetry_order`` (n, k): the profile's rotational symmetry (0: round, any twist fits).
+- ``peg_radius`` and ``peg_height`` (n, k).
+
+Success is the same in both tasks: an insertable end at least ``INSERTED_FRACTION`` of the depth in, within
+the peg's radius of the hole's axis, and the axes aligned within ``ALIGNMENT_TOLERANCE``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+
+from mani_skill_space.envs.base import RestingPlacement, turned_about_z
+from mani_skill_space.geometry import insertion_measures, pose_matrix
+from mani_skill_space.procgen.asset import Asset
+from mani_skill_space.rewards import RewardTerm, band_distance
+
+INSERTED_FRACTION = 0.9
+ALIGNMENT_TOLERANCE = np.radians(5.0)
+PEG_LIFT_BAND = (0.05, 0.55)
+"""A lifted peg earns the lift term 0.05-0.55 m above where it lay."""
+PEG_DROP_CLEARANCE = 0.0005
+PEG_HEADING_JITTER = np.pi / 16
+"""A peg lies pointing at the arm (its tip, the end that goes in, toward the arm) within this angle, as in the
+reference (a fixed heading +- pi/16). Lying across, a grasp of its side would turn the hand's long side toward
+the rover's front."""
+LYING_AXIS = np.array([0.0, 0.0, 1.0])
+"""A peg lies on a side, never on an end: its axis (z) is never the resting direction."""
+
+
+def insertion_terms(prefix: str = "") -> tuple[RewardTerm, ...]:
+    """Peg-in-Hole's dense terms (the reference's weights), each name prefixed with ``prefix``."""
+    return (
+        RewardTerm(f"{prefix}reach", 1.0, sigma=0.25),
+        RewardTerm(f"{prefix}grasp", 4.0),
+        RewardTerm(f"{prefix}lift", 8.0, sigma=0.05),
+        RewardTerm(f"{prefix}align_axis", 8.0, sigma=0.5),
+        RewardTerm(f"{prefix}align_twist", 4.0, sigma=0.2),
+        RewardTerm(f"{prefix}entrance", 16.0, sigma=0.05),
+        RewardTerm(f"{prefix}bottom", 128.0, sigma=0.005),
+    )
+
+
+INSERTION_VALUE = sum(term.weight for term in insertion_terms())
+"""What one inserted peg's dense terms add up to at most (169)."""
+
+
+@dataclass(frozen=True)
+class PegInsertion:
+    """``k`` pegs and ``k`` holes per env, batched (see the module docstring for the frames)."""
+
+    hole_entrance: torch.Tensor
+    hole_bottom: torch.Tensor
+    hole_depth: torch.Tensor
+    symmetry_order: torch.Tensor
+    peg_ends: torch.Tensor
+    peg_end_valid: torch.Tensor
+    peg_radius: torch.Tensor
+    peg_height: torch.Tensor
+
+    @classmethod
+    def from_assets(
+        cls,
+        pegs: Sequence[Sequence[Asset]],
+        hole_entrances: Sequence[Sequence[np.ndarray]],
+        hole_bottoms: Sequence[Sequence[np.ndarray]],
+        hole_depths: Sequence[Sequence[float]],
+        symmetry_orders: Sequence[Sequence[int]],
+        device,
+    ) -> "PegInsertion":
+        """From per-env lists (one entry per peg or hole) of peg assets and world hole frames."""
+        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32, device=device)  # noqa: E731
+        return cls(
+            hole_entrance=as_tensor(hole_entrances),
+            hole_bottom=as_tensor(hole_bottoms),
+            hole_depth=as_tensor(hole_depths),
+            symmetry_order=torch.as_tensor(np.asarray(symmetry_orders), device=device),
+            peg_ends=as_tensor([[[p.frames["end_0"], p.frames.get("end_1", p.frames["end_0"])] for p in env_pegs] for env_pegs in pegs]),
+            peg_end_valid=torch.as_tensor([[[True, "end_1" in p.frames] for p in env_pegs] for env_pegs in pegs], device=device),
+            peg_radius=as_tensor([[p.info["radius"] for p in env_pegs] for env_pegs in pegs]),
+            peg_height=as_tensor([[p.info["height"] for p in env_pegs] for env_pegs in pegs]),
+        )
+
+    @property
+    def count(self) -> int:
+        return self.hole_depth.shape[1]
+
+    def end_frames(self, peg_positions: torch.Tensor, peg_quaternions: torch.Tensor) -> torch.Tensor:
+        """World poses (n, k, 2, 4, 4) of the pegs' insertable ends, given the pegs' poses (n, k, 3) and (n, k, 4)."""
+        return pose_matrix(peg_positions, peg_quaternions).unsqueeze(2) @ self.peg_ends
+
+    def measures(self, end_frames: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``insertion_measures`` of peg i in hole i, each (n, k)."""
+        n, k = self.hole_depth.shape
+        flat = insertion_measures(
+            end_frames.reshape(n * k, 2, 4, 4),
+            self.peg_end_valid.reshape(n * k, 2),
+            self.hole_entrance.reshape(n * k, 4, 4),
+            self.hole_bottom.reshape(n * k, 4, 4),
+            self.hole_depth.reshape(n * k),
+            self.symmetry_order.reshape(n * k),
+        )
+        return {name: value.reshape(n, k) for name, value in flat.items()}
+
+    def all_pair_measures(self, end_frames: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``insertion_measures`` of every peg in every hole, each (n, k pegs, k holes)."""
+        n, k = self.hole_depth.shape
+        flat = insertion_measures(
+            end_frames[:, :, None].expand(n, k, k, 2, 4, 4).reshape(-1, 2, 4, 4),
+            self.peg_end_valid[:, :, None].expand(n, k, k, 2).reshape(-1, 2),
+            self.hole_entrance[:, None].expand(n, k, k, 4, 4).reshape(-1, 4, 4),
+            self.hole_bottom[:, None].expand(n, k, k, 4, 4).reshape(-1, 4, 4),
+            self.hole_depth[:, None].expand(n, k, k).reshape(-1),
+            self.symmetry_order[:, None].expand(n, k, k).reshape(-1),
+        )
+        return {name: value.reshape(n, k, k) for name, value in flat.items()}
+
+
+def is_inserted(measures: dict[str, torch.Tensor], peg_radius: torch.Tensor) -> torch.Tensor:
+    """The end is deep enough and on the hole's axis (``peg_radius`` broadcast to the measures' shape)."""
+    return (measures["inserted_fraction"] >= INSERTED_FRACTION) & (measures["lateral_offset"] <= peg_radius)
+
+
+def is_aligned(measures: dict[str, torch.Tensor]) -> torch.Tensor:
+    return measures["axis_angle"] <= ALIGNMENT_TOLERANCE
+
+
+def insertion_inputs(
+    tcp_position: torch.Tensor, peg_position: torch.Tensor, grasped: torch.Tensor, start_height: torch.Tensor, measures: dict[str, torch.Tensor]
+) -> dict[str, torch.Tensor]:
+    """Inputs of ``insertion_terms()`` (unprefixed names), any batch shape: the TCP (..., 3) and peg (..., 3)
+    positions, whether the peg is grasped, the height it lay at and its measures in the hole it goes to."""
+    return dict(
+        reach=torch.linalg.norm(tcp_position - peg_position, dim=-1),
+        grasp=grasped,
+        lift=band_distance(peg_position[..., 2] - start_height, *PEG_LIFT_BAND),
+        align_axis=1.0 - torch.cos(measures["axis_angle"]),
+        align_twist=measures["twist_error"],
+        entrance=measures["tip_to_entrance"],
+        bottom=measures["tip_to_bottom"],
+    )
+
+
+def peg_placement(pegs: Sequence[Asset], device) -> RestingPlacement:
+    """Resting orientations of one peg per env, lying on a side."""
+    return RestingPlacement(pegs, device, exclude_axis=LYING_AXIS)
+
+
+def lying_peg_orientation(placement: RestingPlacement, env_idx: torch.Tensor, rng) -> torch.Tensor:
+    """wxyz orientations (b, 4) of pegs lying on a random stable side, their axis (tip to head) pointing away
+    from the arm within ``PEG_HEADING_JITTER``. Draws from the batched episode ``rng``: the face, then the
+    heading."""
+    resting = placement.face_down(env_idx, rng.uniform(0.0, 1.0))
+    axis = quaternion_to_matrix(resting)[:, :, 2]
+    heading = torch.as_tensor(rng.uniform(-PEG_HEADING_JITTER, PEG_HEADING_JITTER), dtype=torch.float32, device=resting.device)
+    return turned_about_z(resting, heading - torch.atan2(axis[:, 1], axis[:, 0]))

@@ -1,0 +1,229 @@
+"""Peg insertion as a component the Peg-in-Hole and Solar Panel oracles share.
+
+Before touching the peg it plans the insertion: the hand will take the lying peg from above, tilted toward the
+peg's tip, which fixes how it will hold the peg over the hole for each twist the profile's symmetry allows;
+the first twist (the hand pointing down and away from the arm first) for which the arm can line the peg up
+above the entrance and push it straight to the bottom wins. Then: grasp, lift, line the tip up above
+the entrance, re-measure the peg in the hand and correct, and servo the tip down the hole's axis,
+re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that).
+
+The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_space.envs.insertion``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Optional
+
+import numpy as np
+import sapien
+
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off
+
+PRE_GRASP_DISTANCE = 0.08
+PAD_REACH = 0.016
+"""How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
+GRASP_TILT; they must stay above the module while the peg goes in."""
+FINGER_MARGIN = 0.006
+HEAD_OVERHANG = 0.005
+"""The grasp point may be this close to the peg's head: the pads may overhang its end."""
+GRASP_TILTS = np.radians([45.0, 30.0, 60.0])
+"""The hand takes the lying peg tilted toward the peg's tip by one of these angles (the first that works).
+Turned tip-down over the hole, the peg then hangs from a hand pointing below level, its body rising away from
+the module's top: a level hand would hit the block beside a short peg."""
+ROUND_PEG_TWISTS = 8
+"""Candidate twists tried for a peg that fits the hole at any twist."""
+APPROACH_GAP = 0.1
+"""The arm swings the peg over the hole with its tip this far above the entrance, on the hole's axis."""
+PRE_INSERT_GAP = 0.03
+"""How far above the entrance the tip is lined up before going in."""
+PRESS_DEPTH = 0.003
+"""The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
+SETTLE_STEPS = 4
+RETRY_BELOW_FRACTION = 0.9
+RELAXED_HEIGHT = 0.0005
+"""Where the tip is held, above the bottom, while the push eases off before letting go."""
+AXIS_KEEPOUT = 0.04
+"""The module's surface within this distance (m) of the peg's side, around the hole's axis, is left out of
+the planner's obstacles: the fingers holding the peg come that close to it."""
+KEEPOUT_BELOW_ENTRANCE = 0.01
+"""...down to this far below the entrance (the fingers hold the peg above it)."""
+
+
+@dataclass
+class PegTarget:
+    """One peg and the hole it goes into, as the oracle sees them (world frame, numpy)."""
+
+    peg: Any
+    """The peg's actor (for grasp checks)."""
+    end_frames: Callable[[], np.ndarray]
+    """The peg's insertable ends now, (2, 4, 4) (the second repeats the first if only one)."""
+    end_valid: np.ndarray
+    bottom: np.ndarray
+    """The hole's bottom frame (z out of the hole)."""
+    depth: float
+    symmetry: int
+    radius: float
+    height: float
+
+    @classmethod
+    def of(cls, env, peg, index: int) -> "PegTarget":
+        """Peg ``index`` of the env's ``insertion`` (its actor ``peg``) and its hole, in the first env."""
+        insertion = env.insertion
+        return cls(
+            peg=peg,
+            end_frames=lambda: env.peg_end_frames()[0, index].cpu().numpy().astype(np.float64),
+            end_valid=insertion.peg_end_valid[0, index].cpu().numpy(),
+            bottom=insertion.hole_bottom[0, index].cpu().numpy().astype(np.float64),
+            depth=float(insertion.hole_depth[0, index]),
+            symmetry=int(insertion.symmetry_order[0, index]),
+            radius=float(insertion.peg_radius[0, index]),
+            height=float(insertion.peg_height[0, index]),
+        )
+
+
+@dataclass(frozen=True)
+class InsertionSettings:
+    lift_height: float = 0.3
+    """Height (m) of the TCP after lifting the peg, before swinging it over the hole."""
+    relax_steps: int = 0
+    """Steps spent easing off the push at the end of the insertion (for a peg that will be let go)."""
+    insert_attempts: int = 1
+    """Pushes tried (the first that gets the peg in ends it)."""
+    insert_step: float = 0.0025
+    """How far (m) the tip goes down the hole's axis per control step while inserting."""
+    refine_passes: int = 2
+    """How often the tip is re-lined up over the entrance, re-measuring the peg in the hand, before the push."""
+
+
+class PegInserter:
+    """Grasps a lying peg, lines it up over its hole and pushes it to the bottom, with the motions of ``oracle``
+    (whose solver must be ready, with the hole's surroundings as obstacles)."""
+
+    def __init__(self, oracle: Oracle, settings: InsertionSettings = InsertionSettings()):
+        self.oracle, self.settings = oracle, settings
+
+    def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
+        """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
+        end = self._end_toward_arm(target)
+        grasp, twist = self._plan_grasp(target, end)
+        bottom, depth = target.bottom, target.depth
+
+        yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
+        yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
+        yield from self.oracle.set_gripper(GRIPPER_CLOSED)
+        yield from self.oracle.wait_for_grasp(target.peg, "the peg")
+        yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift")
+
+        for attempt in range(self.settings.insert_attempts):
+            if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
+                yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
+            yield from self._push_in(target, end, twist, line_up=attempt == 0)
+            if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
+                break
+        if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
+            yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
+
+    def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Iterator[np.ndarray]:
+        bottom, depth = target.bottom, target.depth
+        if line_up:
+            yield from self.oracle.joint_move(self._line_up(target, end, twist), "over the hole")
+        for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
+            yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+        start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
+        steps = int(np.ceil((start - finish) / self.settings.insert_step))
+        height = lambda step: max(finish, start - (step + 1) * self.settings.insert_step)  # noqa: E731
+        yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+
+    @staticmethod
+    def _inserted_fraction(target: PegTarget, end: int) -> float:
+        tip = target.end_frames()[end][:3, 3]
+        return 1.0 - float((tip - target.bottom[:3, 3]) @ target.bottom[:3, 2]) / target.depth
+
+    # ------------------------------------------------------------------ planning
+    def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
+        bottom, depth = target.bottom, target.depth
+        tip = target.end_frames()[end]
+        outward = bottom[:3, 3] - self.oracle.solver.base_pose.p
+        outward[2] = 0.0
+        outward /= np.linalg.norm(outward)
+        for tilt in GRASP_TILTS:
+            grasp = self._grasp_pose(target, tip, tilt)
+            if not (self.oracle.ik_solutions(grasp) and self.oracle.ik_solutions(backed_off(grasp, PRE_GRASP_DISTANCE))):
+                continue
+            tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
+            hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
+            # the hand pointing down and away from the arm first
+            score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
+            for twist in sorted(_twists(target.symmetry), key=score):
+                if self._insertion_arm(bottom, depth, twist, tip_in_hand) is not None:
+                    return grasp, float(twist)
+        raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+
+    def _line_up(self, target: PegTarget, end: int, twist: float) -> np.ndarray:
+        """An arm configuration for the planned twist, given how the hand really holds the peg now."""
+        tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
+        arm = self._insertion_arm(target.bottom, target.depth, twist, tip_in_hand, start=self.oracle.arm_qpos())
+        if arm is None:
+            raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
+        return arm
+
+    def _insertion_arm(self, bottom, depth, twist, tip_in_hand, start: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """An arm configuration holding the tip over the hole on its axis (with ``tip_in_hand``) from which a
+        straight push reaches the bottom, and (given ``start``) a straight joint move reaches it; None if there
+        is none."""
+        hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
+        pressed = hand(-PRESS_DEPTH)
+        for arm in self.oracle.ik_solutions(hand(depth + APPROACH_GAP)):
+            if (start is None or self.oracle.path_is_free(start, arm)) and self.oracle.screw_is_feasible(arm, pressed):
+                return arm
+        return None
+
+    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float) -> sapien.Pose:
+        """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip, with the finger pads
+        far enough from the tip to stay out of the hole."""
+        axis = tip[:3, 2]
+        height, depth = target.height, target.depth
+        reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
+        closing = np.cross(axis, [0.0, 0.0, 1.0])
+        closing /= np.linalg.norm(closing)
+        upward = np.cross(closing, axis)
+        upward *= np.sign(upward[2])
+        approach = -np.sin(tilt) * axis - np.cos(tilt) * upward
+        return self.oracle.env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
+
+    def _end_toward_arm(self, target: PegTarget) -> int:
+        """Of the insertable ends, the one nearest the arm: the hand, tilted toward the tip, then comes from the
+        far side of the peg and keeps clear of the rover."""
+        ends = target.end_frames()
+        distance = [np.linalg.norm(ends[i][:2, 3] - self.oracle.solver.base_pose.p[:2]) if target.end_valid[i] else np.inf for i in range(len(ends))]
+        return int(np.argmin(distance))
+
+    # ------------------------------------------------------------------ measuring
+    def _tcp_for_tip(self, target: PegTarget, end: int, tip_goal: np.ndarray) -> sapien.Pose:
+        """The TCP pose that puts the peg's end at ``tip_goal``, given how the hand holds the peg right now."""
+        tip_in_tcp = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
+        return sapien.Pose(tip_goal @ np.linalg.inv(tip_in_tcp))
+
+
+def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
+    """Obstacle points except around the hole's axis near its entrance, where the peg and the fingers holding
+    it go in (deeper down, e.g. a post's sides, they stay: the hand must not run into them on its way)."""
+    bottom = target.bottom
+    offset = points - bottom[:3, 3]
+    along = offset @ bottom[:3, 2]
+    lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
+    near_entrance = along > target.depth - KEEPOUT_BELOW_ENTRANCE
+    return points[(lateral > target.radius + AXIS_KEEPOUT) | ~near_entrance]
+
+
+def _twists(order: int) -> np.ndarray:
+    count = ROUND_PEG_TWISTS if order == 0 else order
+    return np.arange(count) * 2 * np.pi / count
+
+
+def _along_axis(bottom: np.ndarray, twist: float, height: float) -> np.ndarray:
+    """The hole's bottom frame turned by ``twist`` about its axis and raised ``height`` along it."""
+    c, s = np.cos(twist), np.sin(twist)
+    turn = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, height], [0, 0, 0, 1]])
+    return bottom @ turn
