@@ -30,11 +30,11 @@ from mani_skill_space.learning import (
     BestCheckpoint,
     CheckpointPolicy,
     LearningCurve,
-    evaluate_policy,
     load_demonstrations,
     save_checkpoint,
     task_of_demonstrations,
 )
+from mani_skill_space.rollout import evaluate_policy
 
 
 @dataclass

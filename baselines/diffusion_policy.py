@@ -27,11 +27,11 @@ from mani_skill_space.learning import (
     CheckpointPolicy,
     DiffusionNoisePredictor,
     LearningCurve,
-    evaluate_policy,
     load_demonstrations,
     save_checkpoint,
     task_of_demonstrations,
 )
+from mani_skill_space.rollout import evaluate_policy
 
 
 @dataclass

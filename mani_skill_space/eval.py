@@ -31,10 +31,8 @@ from tqdm import tqdm
 
 from mani_skill_space.metrics import EpisodeResult, summarize
 from mani_skill_space.policies import load_policy
-from mani_skill_space.rollout import run_episode
+from mani_skill_space.rollout import evaluation_env_kwargs, run_episode
 from mani_skill_space.suites import Configuration, Suite, load_suite
-
-STATE_OBS_MODES = ("state", "state_dict", "none")
 
 
 @dataclass
@@ -59,19 +57,6 @@ class Chunk:
     video_dir: Optional[str] = None
 
 
-def env_kwargs(configuration: Configuration, control_mode: Optional[str], render: bool, obs_mode: Optional[str] = None) -> dict:
-    kwargs = dict(configuration.kwargs)
-    if control_mode is not None:
-        kwargs["control_mode"] = control_mode
-    if obs_mode is not None:
-        kwargs["obs_mode"] = obs_mode
-    if render:
-        kwargs["render_mode"] = "rgb_array"
-    elif kwargs.get("obs_mode", "state") in STATE_OBS_MODES:
-        kwargs.setdefault("render_backend", "none")
-    return kwargs
-
-
 _ENVS: dict[str, gym.Env] = {}
 
 
@@ -91,7 +76,7 @@ def run_chunk(chunk: Chunk) -> list[EpisodeResult]:
     import mani_skill_space  # noqa: F401  (registers the envs in a spawned worker)
 
     policy = load_policy(chunk.policy)
-    kwargs = env_kwargs(chunk.configuration, getattr(policy, "control_mode", None), chunk.video_dir is not None, getattr(policy, "obs_mode", None))
+    kwargs = evaluation_env_kwargs(chunk.configuration.kwargs, policy, render=chunk.video_dir is not None)
     env = _cached_env(chunk.configuration.env_id, kwargs)
     results = []
     for seed in chunk.seeds:

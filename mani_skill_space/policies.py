@@ -1,10 +1,4 @@
-"""Policies the evaluation CLI and the demo generator run: an object with ``act(obs) -> action``.
-
-A policy may also define ``control_mode`` (the env is made with it; None keeps the env's default) and
-``reset(env, seed)`` (called after every ``env.reset(seed=seed)``; ``env`` is the gym env, so privileged
-policies such as the oracles can read ``env.unwrapped``).
-
-A policy may define ``obs_mode`` too (the env is made with it; e.g. a checkpoint trained on RGB-D).
+"""The built-in policies and ``load_policy`` (see ``mani_skill_space.policy`` for the protocol).
 
 ``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle``, ``checkpoint:PATH`` (a
 baseline trained by ``baselines/*.py``, see ``mani_skill_space.learning``) or ``module:callable``, where
@@ -18,18 +12,9 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from mani_skill_space.policy import Policy
+
 BUILTIN_POLICIES = ("random", "zero", "oracle")
-
-
-class Policy:
-    control_mode: Optional[str] = None
-    obs_mode: Optional[str] = None
-
-    def reset(self, env, seed: int) -> None:
-        """Called after each ``env.reset(seed=seed)``."""
-
-    def act(self, obs) -> np.ndarray:
-        raise NotImplementedError
 
 
 class RandomPolicy(Policy):

@@ -1,12 +1,30 @@
-"""Running one episode of a policy on an env: the loop the evaluation CLI and the demo generator share."""
+"""Running a policy on an env: the episode loop and the evaluation protocol that the evaluation CLI, the demo
+generator and the baselines' training-time evaluations share."""
 
 from __future__ import annotations
 
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 from mani_skill.utils import gym_utils
 
 from mani_skill_space.metrics import EpisodeResult
+
+STATE_OBS_MODES = ("state", "state_dict", "none")
+"""Observation modes that need no rendering: their envs are made with ``render_backend="none"``."""
+
+
+def evaluation_env_kwargs(kwargs: dict, policy, render: bool = False) -> dict:
+    """The env kwargs an evaluation makes its env with: the task's ``kwargs``, the policy's control and obs mode
+    where it names them, and no renderer unless frames are wanted or the observations need one."""
+    kwargs = dict(kwargs)
+    for key in ("control_mode", "obs_mode"):
+        if getattr(policy, key, None) is not None:
+            kwargs[key] = getattr(policy, key)
+    if render:
+        kwargs["render_mode"] = "rgb_array"
+    elif kwargs.get("obs_mode", "state") in STATE_OBS_MODES:
+        kwargs.setdefault("render_backend", "none")
+    return kwargs
 
 
 def episode_steps(env) -> int:
@@ -48,4 +66,21 @@ def run_episode(
         episode_return=total,
         episode_len=first_success or steps,
         failure=getattr(policy, "failure", None) or "",
+    )
+
+
+def evaluate_policy(policy, env_id: str, env_kwargs: dict, seeds: Sequence[int]) -> dict[str, float]:
+    """success_once, success_at_end and mean return of ``policy`` over ``seeds``, by the evaluation CLI's protocol
+    (its env kwargs, a fresh scene per seed, episodes to the time limit)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, **evaluation_env_kwargs(env_kwargs, policy))
+    try:
+        results = [run_episode(env, policy, seed) for seed in seeds]
+    finally:
+        env.close()
+    return dict(
+        success_once=sum(r.success_once for r in results) / len(results),
+        success_at_end=sum(r.success_at_end for r in results) / len(results),
+        episode_return=sum(r.episode_return for r in results) / len(results),
     )

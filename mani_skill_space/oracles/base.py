@@ -19,7 +19,7 @@ import sapien
 from mani_skill.examples.motionplanning.panda.motionplanner import PandaArmMotionPlanningSolver
 from scipy.spatial.transform import Rotation
 
-from mani_skill_space.policies import Policy
+from mani_skill_space.policy import Policy
 
 GRIPPER_OPEN = 1.0
 GRIPPER_CLOSED = -1.0

@@ -1,0 +1,56 @@
+"""What the learning baselines (``baselines/``) share with the evaluation CLI.
+
+- ``observations``: observation encoding for the networks (state, or state plus RGB-D);
+- ``networks``: PPO's actor-critic, SAC's actor, the BC MLP and the diffusion policy's denoiser;
+- ``checkpoints``: saving, safe loading (tensors and plain data only) and ``CheckpointPolicy``, which the
+  evaluation CLI runs for ``--policy checkpoint:PATH``; ``BestCheckpoint`` keeps the best one seen in training;
+- ``vector_env``: vectorised training envs (GPU-batched, or CPU worker processes);
+- ``curves``: learning curves (CSV and PNG);
+- ``demonstrations``: ManiSkill trajectory files as the imitation learners read them.
+
+Baselines evaluate during training with ``mani_skill_space.rollout.evaluate_policy``: the evaluation CLI's
+protocol and code.
+"""
+
+from mani_skill_space.learning.checkpoints import BestCheckpoint, CheckpointError, CheckpointPolicy, load_checkpoint, load_model, save_checkpoint
+from mani_skill_space.learning.curves import LearningCurve
+from mani_skill_space.learning.demonstrations import RECORDING_KWARGS, load_demonstrations, task_of_demonstrations
+from mani_skill_space.learning.networks import (
+    MODELS,
+    OBS_CLIP,
+    BehaviourCloningPolicy,
+    DiffusionNoisePredictor,
+    GaussianActorCritic,
+    ObservationEncoder,
+    SquashedGaussianActor,
+    denoise,
+    mlp,
+)
+from mani_skill_space.learning.observations import IMAGE_OBS_MODES, STATE_OBS_MODES, encode_observation
+from mani_skill_space.learning.vector_env import VectorEnv
+
+__all__ = [
+    "BehaviourCloningPolicy",
+    "BestCheckpoint",
+    "CheckpointError",
+    "CheckpointPolicy",
+    "DiffusionNoisePredictor",
+    "GaussianActorCritic",
+    "IMAGE_OBS_MODES",
+    "LearningCurve",
+    "MODELS",
+    "OBS_CLIP",
+    "ObservationEncoder",
+    "RECORDING_KWARGS",
+    "STATE_OBS_MODES",
+    "SquashedGaussianActor",
+    "VectorEnv",
+    "denoise",
+    "encode_observation",
+    "load_checkpoint",
+    "load_demonstrations",
+    "load_model",
+    "mlp",
+    "save_checkpoint",
+    "task_of_demonstrations",
+]

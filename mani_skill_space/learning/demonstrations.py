@@ -1,0 +1,47 @@
+"""Demonstrations in ManiSkill's trajectory format, as the imitation baselines read them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+
+def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[int] = None) -> tuple[list[dict[str, np.ndarray]], dict]:
+    """Episodes of a ManiSkill trajectory file (``.h5`` + ``.json``, state observations): a list of
+    ``{"obs": (T + 1, d), "actions": (T, a)}`` and the file's env info (env id, env kwargs)."""
+    import json
+
+    import h5py
+
+    path = Path(path)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    episodes = []
+    with h5py.File(path, "r") as data:
+        for episode in meta["episodes"]:
+            if success_only and not episode.get("success", False):
+                continue
+            trajectory = data[f"traj_{episode['episode_id']}"]
+            obs = trajectory["obs"]
+            if not isinstance(obs, h5py.Dataset):
+                raise ValueError(f"{path} has {sorted(obs.keys())} observations; convert it with obs mode 'state' (-o state)")
+            episodes.append({"obs": np.asarray(obs, dtype=np.float32), "actions": np.asarray(trajectory["actions"], dtype=np.float32)})
+            if limit is not None and len(episodes) >= limit:
+                break
+    if not episodes:
+        raise ValueError(f"{path} holds no {'successful ' if success_only else ''}episodes")
+    return episodes, meta["env_info"]
+
+
+RECORDING_KWARGS = ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs")
+"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task."""
+
+
+def task_of_demonstrations(env_info: dict) -> tuple[str, dict, str, str]:
+    """Env id, task kwargs (domain, asset source, ...), obs mode and control mode of a trajectory file's env info."""
+    env_kwargs = {k: v for k, v in env_info["env_kwargs"].items() if k not in RECORDING_KWARGS}
+    control_mode = env_kwargs.pop("control_mode")
+    obs_mode = env_kwargs.pop("obs_mode", "state")
+    return env_info["env_id"], env_kwargs, obs_mode, control_mode
+

@@ -1,0 +1,159 @@
+"""The baselines' networks (ManiSkill's PPO agent, SAC's actor, a BC MLP, a diffusion policy's denoiser)."""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import numpy as np
+import torch
+import torch.nn as nn
+
+def mlp(sizes: Sequence[int], activation=nn.ReLU, output_activation=None) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(activation())
+        elif output_activation is not None:
+            layers.append(output_activation())
+    return nn.Sequential(*layers)
+
+
+class ObservationEncoder(nn.Module):
+    """State as is; in rgbd mode, RGB and depth (metres, clipped) through a small CNN (ManiSkill's PPO-RGB
+    encoder: NatureCNN-like) concatenated with the state."""
+
+    def __init__(self, state_dim: int, image_channels: int = 0, image_size: int = 64, features: int = 256):
+        super().__init__()
+        self.state_dim, self.image_channels = state_dim, image_channels
+        self.out_dim = state_dim
+        if image_channels:
+            self.cnn = nn.Sequential(
+                nn.Conv2d(image_channels, 32, 8, stride=4),
+                nn.ReLU(),
+                nn.Conv2d(32, 64, 4, stride=2),
+                nn.ReLU(),
+                nn.Conv2d(64, 64, 3, stride=1),
+                nn.ReLU(),
+                nn.Flatten(),
+            )
+            with torch.no_grad():
+                flat = self.cnn(torch.zeros(1, image_channels, image_size, image_size)).shape[1]
+            self.image_head = nn.Sequential(nn.Linear(flat, features), nn.ReLU())
+            self.out_dim = state_dim + features
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        if not self.image_channels:
+            return obs["state"]
+        depth = torch.clamp(obs["depth"].float() / 1000.0, 0.0, 4.0)  # ManiSkill depth is in millimetres
+        image = torch.cat([obs["rgb"].float() / 255.0, depth], dim=-1).permute(0, 3, 1, 2)
+        return torch.cat([obs["state"], self.image_head(self.cnn(image))], dim=-1)
+
+
+class GaussianActorCritic(nn.Module):
+    """PPO's agent (ManiSkill's baseline): a tanh MLP actor with a state-independent log std, and a critic."""
+
+    def __init__(self, state_dim: int, action_dim: int, image_channels: int = 0, hidden: int = 256):
+        super().__init__()
+        self.encoder = ObservationEncoder(state_dim, image_channels)
+        features = self.encoder.out_dim
+        self.critic = nn.Sequential(mlp([features, hidden, hidden], nn.Tanh, nn.Tanh), nn.Linear(hidden, 1))
+        self.actor_mean = nn.Sequential(mlp([features, hidden, hidden], nn.Tanh, nn.Tanh), nn.Linear(hidden, action_dim))
+        nn.init.orthogonal_(self.actor_mean[-1].weight, 0.01)
+        self.actor_logstd = nn.Parameter(torch.full((1, action_dim), -0.5))
+
+    def value(self, obs) -> torch.Tensor:
+        return self.critic(self.encoder(obs)).squeeze(-1)
+
+    def distribution(self, obs) -> tuple[torch.distributions.Normal, torch.Tensor]:
+        features = self.encoder(obs)
+        mean = self.actor_mean(features)
+        return torch.distributions.Normal(mean, self.actor_logstd.expand_as(mean).exp()), self.critic(features).squeeze(-1)
+
+    def act(self, obs) -> torch.Tensor:
+        return self.actor_mean(self.encoder(obs))
+
+
+class SquashedGaussianActor(nn.Module):
+    """SAC's actor: a tanh-squashed Gaussian scaled to the action bounds."""
+
+    LOG_STD_RANGE = (-5.0, 2.0)
+
+    def __init__(self, state_dim: int, action_dim: int, action_low: Sequence[float], action_high: Sequence[float], hidden: int = 256):
+        super().__init__()
+        self.body = mlp([state_dim, hidden, hidden], output_activation=nn.ReLU)
+        self.mean = nn.Linear(hidden, action_dim)
+        self.log_std = nn.Linear(hidden, action_dim)
+        low, high = torch.as_tensor(action_low, dtype=torch.float32), torch.as_tensor(action_high, dtype=torch.float32)
+        self.register_buffer("scale", (high - low) / 2)
+        self.register_buffer("bias", (high + low) / 2)
+
+    def sample(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
+        hidden = self.body(obs["state"])
+        mean, log_std = self.mean(hidden), torch.clamp(self.log_std(hidden), *self.LOG_STD_RANGE)
+        normal = torch.distributions.Normal(mean, log_std.exp())
+        raw = normal.rsample()
+        squashed = torch.tanh(raw)
+        log_prob = normal.log_prob(raw) - torch.log(self.scale * (1 - squashed.pow(2)) + 1e-6)
+        return squashed * self.scale + self.bias, log_prob.sum(-1)
+
+    def act(self, obs) -> torch.Tensor:
+        return torch.tanh(self.mean(self.body(obs["state"]))) * self.scale + self.bias
+
+
+OBS_CLIP = 5.0
+"""Normalised observations are clipped to +-5 standard deviations: contact forces (the wrist wrench) have heavy
+tails, and an unseen spike would otherwise swamp the network's input."""
+
+
+class BehaviourCloningPolicy(nn.Module):
+    """An MLP from (normalised, clipped) state to action."""
+
+    def __init__(self, state_dim: int, action_dim: int, hidden: int = 512, depth: int = 3):
+        super().__init__()
+        self.net = mlp([state_dim, *([hidden] * depth), action_dim])
+        self.register_buffer("obs_mean", torch.zeros(state_dim))
+        self.register_buffer("obs_std", torch.ones(state_dim))
+
+    def forward(self, state: torch.Tensor) -> torch.Tensor:
+        return self.net(torch.clamp((state - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP))
+
+    def act(self, obs) -> torch.Tensor:
+        return self(obs["state"])
+
+
+class DiffusionNoisePredictor(nn.Module):
+    """The diffusion policy's denoiser: predicts the noise in an action chunk, given the observation history
+    and the diffusion step (an MLP version of Chi et al.'s conditional network)."""
+
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, hidden: int = 512, step_features: int = 64):
+        super().__init__()
+        self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
+        self.step_features = step_features
+        self.net = mlp([action_dim * action_horizon + state_dim * obs_horizon + step_features, hidden, hidden, hidden, action_dim * action_horizon], nn.Mish)
+        self.register_buffer("obs_mean", torch.zeros(state_dim))
+        self.register_buffer("obs_std", torch.ones(state_dim))
+
+    def forward(self, noisy_actions: torch.Tensor, step: torch.Tensor, obs_history: torch.Tensor) -> torch.Tensor:
+        n = noisy_actions.shape[0]
+        half = self.step_features // 2
+        frequencies = torch.exp(-np.log(10000.0) * torch.arange(half, device=step.device) / half)
+        angles = step.float().reshape(-1, 1) * frequencies[None]
+        step_embedding = torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
+        conditioning = torch.clamp((obs_history - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP).reshape(n, -1)
+        out = self.net(torch.cat([noisy_actions.reshape(n, -1), conditioning, step_embedding], dim=-1))
+        return out.reshape(n, self.action_horizon, self.action_dim)
+
+
+MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianActor, BehaviourCloningPolicy, DiffusionNoisePredictor)}
+
+
+def denoise(model: DiffusionNoisePredictor, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
+    """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion."""
+    actions = torch.randn((obs_history.shape[0], model.action_horizon, model.action_dim), generator=generator, device=obs_history.device)
+    scheduler.set_timesteps(inference_steps)
+    for step in scheduler.timesteps:
+        noise = model(actions, step.to(obs_history.device), obs_history)
+        actions = scheduler.step(noise, step, actions).prev_sample
+    return actions.clamp(-1.0, 1.0)
+

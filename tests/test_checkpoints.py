@@ -1,0 +1,64 @@
+"""Checkpoint files never execute code when loaded, and a bad file is named in a clear error."""
+
+import os
+
+import pytest
+import torch
+
+from mani_skill_space.learning import BehaviourCloningPolicy, CheckpointError, CheckpointPolicy, load_checkpoint, save_checkpoint
+
+
+class _RunsCode:
+    """Unpickling this object would create ``path`` (what a crafted checkpoint could do instead)."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (os.mkdir, (self.path,))
+
+
+def test_a_crafted_checkpoint_does_not_run_code(tmp_path):
+    marker = tmp_path / "pwned"
+    crafted = tmp_path / "crafted.pt"
+    torch.save({"algorithm": "bc", "payload": _RunsCode(marker)}, crafted)
+    with pytest.raises(CheckpointError, match="crafted.pt"):
+        CheckpointPolicy(str(crafted))
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("content", [b"", b"not a checkpoint at all", b"PK\x03\x04garbage"], ids=["empty", "text", "corrupt-zip"])
+def test_unreadable_files_are_named(tmp_path, content):
+    path = tmp_path / "model.pt"
+    path.write_bytes(content)
+    with pytest.raises(CheckpointError, match="model.pt"):
+        load_checkpoint(path)
+
+
+def test_a_foreign_checkpoint_is_refused(tmp_path):
+    path = tmp_path / "weights.pt"
+    torch.save({"weight": torch.zeros(3)}, path)
+    with pytest.raises(CheckpointError, match="weights.pt.*not a mani-skill-space checkpoint"):
+        load_checkpoint(path)
+
+
+def test_a_missing_checkpoint_is_named(tmp_path):
+    with pytest.raises(CheckpointError, match="nothing.pt"):
+        CheckpointPolicy(str(tmp_path / "nothing.pt"))
+
+
+def test_saved_checkpoints_load_safely(tmp_path):
+    model = BehaviourCloningPolicy(state_dim=5, action_dim=2, hidden=8, depth=1)
+    path = save_checkpoint(tmp_path / "bc.pt", "bc", model, dict(state_dim=5, action_dim=2, hidden=8, depth=1), "SampleCollection-v1", {"domain": "mars"}, "state", "pd_ee_delta_pose")
+    policy = CheckpointPolicy(str(path))
+    assert policy.env_id == "SampleCollection-v1" and policy.control_mode == "pd_ee_delta_pose"
+    torch.testing.assert_close(policy.model.net[0].weight, model.net[0].weight)
+
+
+def test_the_crafted_file_really_runs_code_without_weights_only(tmp_path):
+    """The control for the test above: the same file, loaded the unsafe way, does run its payload."""
+    marker = tmp_path / "pwned"
+    crafted = tmp_path / "crafted.pt"
+    torch.save({"payload": _RunsCode(marker)}, crafted)
+    torch.load(crafted, weights_only=False)
+    assert marker.exists()
