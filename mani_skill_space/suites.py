@@ -28,6 +28,7 @@ from mani_skill.envs.sapien_env import BaseEnv
 
 from mani_skill_space.envs import TASKS
 from mani_skill_space.envs.base import SpaceManipulationEnv
+from mani_skill_space.kwarg_checks import KwargError
 
 PLANNED_ENV_IDS: tuple[str, ...] = ()
 """Tasks of the benchmark that this version does not implement yet."""
@@ -141,18 +142,22 @@ def _configuration(entry: dict, index: int, locate: "_Locator", episodes: int, s
 
 
 def _check_kwargs(env_class: type[SpaceManipulationEnv], kwargs: dict, locate: "_Locator", index: int) -> None:
+    """The configuration's kwargs checked as the env will check them, reported at the line of the offending key."""
+    try:
+        check_env_kwargs(env_class, kwargs)
+    except KwargError as error:
+        raise SuiteError(f"{locate.where(index, error.kwarg)}: {error}") from None
+
+
+def check_env_kwargs(env_class: type[SpaceManipulationEnv], kwargs: dict) -> dict:
+    """``kwargs`` checked for ``env_class`` without building a scene: every name one that its constructors take,
+    every value of ours (and ManiSkill's control, observation and reward mode) one that the env accepts
+    (``check_task_kwargs``, whose checked values are returned). A ``KwargError`` names the first bad kwarg."""
     accepted = accepted_kwargs(env_class)
-    for key, value in kwargs.items():
+    for key in kwargs:
         if key not in accepted:
-            raise SuiteError(f"{locate.where(index, key)}: {env_class.__name__} takes no kwarg {key!r}; valid choices: {', '.join(sorted(accepted))}")
-    choices = {
-        "domain": env_class.SUPPORTED_DOMAINS,
-        "asset_source": env_class.SUPPORTED_ASSET_SOURCES,
-        "robot_uids": tuple(env_class.SUPPORTED_ROBOTS),
-    }
-    for key, valid in choices.items():
-        if key in kwargs and kwargs[key] not in valid:
-            raise SuiteError(f"{locate.where(index, key)}: unknown {key} {kwargs[key]!r}; valid choices: {', '.join(valid)}")
+            raise KwargError(key, f"{env_class.__name__} takes no kwarg {key!r}; valid choices: {', '.join(sorted(accepted))}")
+    return env_class.check_task_kwargs(**kwargs)
 
 
 def accepted_kwargs(env_class: type) -> set[str]:

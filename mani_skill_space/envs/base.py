@@ -15,13 +15,16 @@ pins this so an upgrade that fixes it is noticed.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Optional, Union
+from functools import lru_cache
+from typing import Any, Callable, ClassVar, Optional, Union
 
 import numpy as np
 import sapien
 import torch
+from mani_skill.agents.registration import REGISTERED_AGENTS
 from mani_skill.agents.robots import Panda, PandaWristCam
 from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.envs.utils.observations import ALL_VISUAL_TEXTURES, parse_obs_mode_to_struct
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConfig, SceneConfig, SimConfig
@@ -30,8 +33,9 @@ from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
 from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.kwarg_checks import KwargError, checked_choice, checked_natural, checked_number
 from mani_skill_space.procgen.asset import Asset, look_at
-from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE
+from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE, check_clearance
 from mani_skill_space.procgen.resting import resting_orientations
 from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
 from mani_skill_space.rewards import RewardTable, RewardTerm, action_rate
@@ -48,6 +52,13 @@ ARM_CONTACT_LIMIT = 10.0
 WRIST_CAMERA_EYE = (0.1, 0.0, -0.07)
 WRIST_CAMERA_TARGET = (0.0, 0.0, 0.12)
 """Wrist camera in the TCP frame (z = approach direction): beside the hand, looking past the fingertips."""
+DEFAULT_CONTROL_MODE = "pd_ee_delta_pose"
+"""The control mode an env gets when none is given (also for ``control_mode=None``, which ManiSkill's tools pass)."""
+DEFAULT_QPOS_NOISE = 0.02
+MAX_QPOS_NOISE = 1.1
+"""Largest ``robot_init_qpos_noise`` (rad): every arm joint starts uniformly within this of the rest pose, and the
+Panda's elbow (joint 4) rests 1.108 rad above its lower limit, the least room of any joint; up to 1.1 rad every joint
+starts within its limits."""
 
 PENALTY_TERMS = (
     RewardTerm("action_rate", -1.4),
@@ -76,31 +87,73 @@ class SpaceManipulationEnv(BaseEnv):
         domain: Optional[str] = None,
         asset_source: Optional[str] = None,
         robot_uids: str = "panda",
-        control_mode: str = "pd_ee_delta_pose",
-        robot_init_qpos_noise: float = 0.02,
+        control_mode: Optional[str] = DEFAULT_CONTROL_MODE,
+        robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         num_envs: int = 1,
         reconfiguration_freq: Optional[int] = None,
         **kwargs,
     ):
-        self.domain = get_domain(domain or self.DEFAULT_DOMAIN, self.SUPPORTED_DOMAINS)
-        self.asset_source = asset_source or self.DEFAULT_ASSET_SOURCE
-        if self.asset_source not in self.SUPPORTED_ASSET_SOURCES:
-            raise ValueError(f"Unknown asset_source {self.asset_source!r}; valid choices: {', '.join(self.SUPPORTED_ASSET_SOURCES)}")
-        if robot_uids not in self.SUPPORTED_ROBOTS:
-            raise ValueError(f"Unsupported robot_uids {robot_uids!r}; valid choices: {', '.join(self.SUPPORTED_ROBOTS)}")
-        self.robot_init_qpos_noise = robot_init_qpos_noise
+        modes = {key: kwargs[key] for key in ("obs_mode", "reward_mode") if key in kwargs}
+        checked = self.check_task_kwargs(
+            domain=domain,
+            asset_source=asset_source,
+            robot_uids=robot_uids,
+            control_mode=control_mode,
+            robot_init_qpos_noise=robot_init_qpos_noise,
+            reconfiguration_freq=reconfiguration_freq,
+            **modes,
+        )
+        self.domain = get_domain(checked["domain"], self.SUPPORTED_DOMAINS)
+        self.asset_source = checked["asset_source"]
+        self.robot_init_qpos_noise = checked["robot_init_qpos_noise"]
         self.mount = self._make_mount()
+        reconfiguration_freq = checked["reconfiguration_freq"]
         if reconfiguration_freq is None:
             # Varied geometry: a single (CPU) env rebuilds its objects every episode; parallel envs differ instead.
             reconfiguration_freq = 1 if num_envs == 1 else 0
         super().__init__(
             *args,
-            robot_uids=robot_uids,
-            control_mode=control_mode,
+            robot_uids=checked["robot_uids"],
+            control_mode=checked["control_mode"],
             num_envs=num_envs,
             reconfiguration_freq=reconfiguration_freq,
             **kwargs,
         )
+
+    @classmethod
+    def check_task_kwargs(cls, **kwargs) -> dict[str, Any]:
+        """Check the env's kwargs without building anything (suites and the command-line tools call this when they
+        read a configuration; ``__init__`` calls it too).
+
+        Checks the kwargs of ours, ``domain``, ``asset_source``, ``robot_uids``, ``robot_init_qpos_noise`` and
+        ``reconfiguration_freq``, and ManiSkill's ``control_mode`` and, where given, ``obs_mode`` and
+        ``reward_mode``. Returns them checked, a missing one or None replaced by its default (``reconfiguration_freq``
+        keeps None: every episode rebuilds the scene of a single env, parallel envs never). Other kwargs (ManiSkill's)
+        are ignored. A bad value raises a ``KwargError`` (a ``ValueError``) naming the kwarg and its valid choices
+        or range. Tasks extend this with their own kwargs."""
+        robot_uids = checked_choice("robot_uids", kwargs.get("robot_uids"), tuple(cls.SUPPORTED_ROBOTS), cls.SUPPORTED_ROBOTS[0])
+        checked: dict[str, Any] = dict(
+            domain=checked_choice("domain", kwargs.get("domain"), cls.SUPPORTED_DOMAINS, cls.DEFAULT_DOMAIN),
+            asset_source=checked_choice("asset_source", kwargs.get("asset_source"), cls.SUPPORTED_ASSET_SOURCES, cls.DEFAULT_ASSET_SOURCE),
+            robot_uids=robot_uids,
+            control_mode=checked_choice("control_mode", kwargs.get("control_mode"), supported_control_modes(robot_uids), DEFAULT_CONTROL_MODE),
+            robot_init_qpos_noise=checked_number(
+                "robot_init_qpos_noise",
+                kwargs.get("robot_init_qpos_noise", DEFAULT_QPOS_NOISE),
+                0.0,
+                MAX_QPOS_NOISE,
+                unit="rad",
+                meaning=f"uniform noise on the arm's joints at reset; beyond {MAX_QPOS_NOISE:g} rad the Panda's elbow can start outside its limits",
+            ),
+            reconfiguration_freq=None
+            if kwargs.get("reconfiguration_freq") is None
+            else checked_natural("reconfiguration_freq", kwargs["reconfiguration_freq"], "reconfigure every that many resets; 0: never"),
+        )
+        if kwargs.get("obs_mode") is not None:
+            checked["obs_mode"] = _checked_obs_mode(kwargs["obs_mode"])
+        if kwargs.get("reward_mode") is not None:
+            checked["reward_mode"] = checked_choice("reward_mode", kwargs["reward_mode"], cls.SUPPORTED_REWARD_MODES)
+        return checked
 
     # ------------------------------------------------------------------ configuration
     @classmethod
@@ -314,12 +367,32 @@ def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     return quaternion_multiply(torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1), quaternion)
 
 
-def socket_clearance(clearance: Optional[float], asset_source: str) -> float:
+def socket_clearance(clearance: Any, asset_source: str, check: Callable[[Any], float] = check_clearance) -> float:
     """The ``clearance`` kwarg of the tasks with procedurally cut sockets, checked: it applies to procedural assets
-    only (the dataset sockets have a fixed 1 mm) and must be positive; None gives the default (1 mm)."""
+    only (the dataset sockets have a fixed 1 mm); ``check`` (the procedural generator's) accepts it if it is positive
+    and at most what the generated sockets hold; None gives the default (1 mm)."""
     if clearance is not None and asset_source == "dataset":
-        raise ValueError("clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
-    checked = DEFAULT_CLEARANCE if clearance is None else float(clearance)
-    if checked <= 0:
-        raise ValueError(f"clearance must be positive (metres), got {clearance}")
-    return checked
+        raise KwargError("clearance", "clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
+    return DEFAULT_CLEARANCE if clearance is None else check(clearance)
+
+
+@lru_cache
+def supported_control_modes(robot_uid: str) -> tuple[str, ...]:
+    """The control modes of a registered ManiSkill robot, without building it: its controller configurations are
+    made from class attributes alone (``tests/test_inputs.py`` checks them against a built agent's)."""
+    agent_class = REGISTERED_AGENTS[robot_uid].agent_cls
+    return tuple(agent_class._controller_configs.fget(object.__new__(agent_class)))
+
+
+def _checked_obs_mode(obs_mode: Any) -> str:
+    """An observation mode ManiSkill accepts: a named mode or textures joined by ``+`` (its own parser's rule)."""
+    named = ("state", "state_dict", "none", "sensor_data", "rgbd", "pointcloud")
+    try:
+        if not isinstance(obs_mode, str):
+            raise TypeError(obs_mode)
+        parse_obs_mode_to_struct(obs_mode)
+    except (AssertionError, TypeError):
+        raise KwargError(
+            "obs_mode", f"unknown obs_mode {obs_mode!r}; valid choices: {', '.join(named)}, or textures ({', '.join(ALL_VISUAL_TEXTURES)}) joined by '+', optionally with state"
+        ) from None
+    return obs_mode

@@ -7,6 +7,7 @@ from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_dynamic_per_env
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix, step_velocities
+from mani_skill_space.kwarg_checks import checked_number
 from mani_skill_space.procgen.asset import look_at
 from mani_skill_space.procgen.debris import make_debris
 from mani_skill_space.procgen.mounts import make_rover, make_station
@@ -22,6 +23,11 @@ TUMBLE_RATE = np.pi
 """Angular velocity per axis, up to this (rad/s) at difficulty 1."""
 SLOWEST_SPEED_SCALE = 0.4
 """At difficulty 0 the debris drifts at 40% of the reference speeds and does not tumble."""
+MAX_DIFFICULTY = 2.0
+"""The hardest setting: twice the reference's tumble (up to 2 pi rad/s per axis, 18 deg per 50 ms control step) and
+1.6x its drift (up to 0.4 m/s: the 1 m to the arm in 2.5 s, a quarter of the episode). A curriculum knob around the
+reference's setting (1), not a way to make capture impossible: beyond 2 the debris turns more than a twentieth of a
+turn between two actions and reaches the arm within the first seconds."""
 LOB_TARGET_X = 0.55
 CALM_SPEED = 0.05
 CALM_SPIN = 0.1
@@ -85,10 +91,17 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
 
     def __init__(self, *args, difficulty: float = 1.0, **kwargs):
-        if not (np.isfinite(difficulty) and difficulty >= 0):
-            raise ValueError(f"difficulty must be a finite number >= 0 (0: slow, 1: the reference's ranges), got {difficulty}")
-        self.difficulty = float(difficulty)
+        self.difficulty = self.check_task_kwargs(difficulty=difficulty)["difficulty"]
         super().__init__(*args, **kwargs)
+
+    @classmethod
+    def check_task_kwargs(cls, **kwargs) -> dict:
+        """The base class's checks, and ``difficulty``: a number in [0, 2] (``MAX_DIFFICULTY``)."""
+        checked = super().check_task_kwargs(**kwargs)
+        checked["difficulty"] = checked_number(
+            "difficulty", kwargs.get("difficulty", 1.0), 0.0, MAX_DIFFICULTY, meaning="0: slow, no tumble; 1: the reference's ranges; 2: twice its tumble"
+        )
+        return checked
 
     def _render_camera_pose(self) -> np.ndarray:
         """From the side, seeing the arm and the debris' whole approach."""

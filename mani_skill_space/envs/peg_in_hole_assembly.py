@@ -21,7 +21,7 @@ from mani_skill_space.envs.insertion import (
 )
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import check_clearance, make_peg_hole_pair
 from mani_skill_space.rewards import RewardTable
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
@@ -72,8 +72,15 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
 
     def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        self.clearance = socket_clearance(clearance, asset_source or self.DEFAULT_ASSET_SOURCE)
+        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
         super().__init__(*args, asset_source=asset_source, **kwargs)
+
+    @classmethod
+    def check_task_kwargs(cls, **kwargs) -> dict:
+        """The base class's checks, and ``clearance``: procedural holes only, in (0, 7 mm] (``peg_hole.MAX_CLEARANCE``)."""
+        checked = super().check_task_kwargs(**kwargs)
+        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], check_clearance)
+        return checked
 
     def _make_mount(self):
         return make_rover() if self.domain.has_ground else make_station()

@@ -28,6 +28,7 @@ from mani_skill_space.procgen.solar_panel import (
     RECEPTACLE_DEPTH,
     SEAT_HEIGHT,
     SOCKET_OFFSETS,
+    check_socket_clearance,
     dataset_layout,
     make_panel,
     make_socket_base,
@@ -112,8 +113,16 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
 
     def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        self.clearance = socket_clearance(clearance, asset_source or self.DEFAULT_ASSET_SOURCE)
+        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
         super().__init__(*args, asset_source=asset_source, **kwargs)
+
+    @classmethod
+    def check_task_kwargs(cls, **kwargs) -> dict:
+        """The base class's checks, and ``clearance``: procedural sockets only, in (0, 1.96 mm]
+        (``solar_panel.MAX_CLEARANCE``: wider bores leave the sharpest profiles' posts thinner walls than 3 mm)."""
+        checked = super().check_task_kwargs(**kwargs)
+        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], check_socket_clearance)
+        return checked
 
     def _make_mount(self):
         return make_rover(cargo_bin=False) if self.domain.has_ground else make_station()

@@ -16,11 +16,13 @@ direction) coincides with ``bottom`` when the peg is fully inserted (up to the c
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
+from mani_skill_space.kwarg_checks import KwargError
 from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart
 from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex
 
@@ -41,6 +43,12 @@ METAL_FRICTION = 0.3
 """Machined metal on metal. (The scene default of 1.0, the reference's, makes a peg wedge in a 1 mm
 clearance hole at the slightest tilt.)"""
 DEFAULT_CLEARANCE = 0.001
+MAX_CLEARANCE = 0.007
+"""The widest clearance (m) for which every pair the generator can draw fits its module with ``MIN_WALL`` walls.
+The tightest pair has the sharpest bore corner there is, a 25 mm triangle squashed to 0.25 across one corner (the
+mitred corner of its bore grows ~7x the clearance), in the deepest hole (50 mm) tilted 20 deg about both x and y:
+it stops fitting at 7.4 mm (found by a search over profile, squash and tilt; ``tests/test_inputs.py`` checks that
+it fits at 7 mm and not at 8 mm, and that random pairs fit at 7 mm)."""
 BORE_EXTENSION = 0.3
 """How far the bore's convex solid reaches past the peg's head (well out of the block)."""
 
@@ -133,8 +141,7 @@ def make_peg(profile: PegProfile, name: str = "peg") -> Asset:
 
 def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: float = DEFAULT_CLEARANCE) -> Asset:
     """The module block (origin at the centre of its base) with a bore for ``profile``."""
-    if clearance <= 0:
-        raise ValueError(f"clearance must be positive (a peg cannot enter a hole of its own size), got {clearance}")
+    clearance = check_clearance(clearance)
     rotation = _tilt_rotation(rng)
     depth = _hole_depth(rng, profile)
     cavity_local = peg_points(profile, grow=clearance, extend=BORE_EXTENSION, bore=True)
@@ -156,6 +163,28 @@ def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: f
         frames={"entrance": _frame(rotation, entrance), "bottom": _frame(rotation, entrance - depth * axis)},
         info={"depth": depth, "clearance": clearance, "symmetry_order": profile.symmetry_order, "module_size": [2 * MODULE_HALF_SIZE] * 2 + [MODULE_HEIGHT]},
     )
+
+
+def check_clearance(clearance: float, maximum: float = MAX_CLEARANCE, limited_by: str = f"every procedural hole module keeps {MIN_WALL * 1000:g} mm walls") -> float:
+    """``clearance`` as a float if it is a number in ``(0, maximum]`` metres: positive, since a peg cannot enter a
+    hole of its own size, and at most what the module's geometry holds (``limited_by`` says what that is)."""
+    if isinstance(clearance, bool) or not isinstance(clearance, numbers.Real) or not 0.0 < float(clearance) <= maximum:
+        raise KwargError(
+            "clearance", f"clearance must be positive and at most {maximum:.5g} m (the widest for which {limited_by}): valid range (0, {maximum:.5g}] m, got {clearance!r}"
+        )
+    return float(clearance)
+
+
+def bore_fits(profile: PegProfile, rotation: np.ndarray, depth: float, clearance: float) -> bool:
+    """Whether the bore for ``profile`` with ``clearance``, its axis turned by ``rotation`` and its floor ``depth``
+    below the entrance, fits the module block with ``MIN_WALL`` walls at some offset (what ``make_hole_module``
+    requires; ``MAX_CLEARANCE`` is the widest clearance at which every drawn pair passes)."""
+    cavity = _place(peg_points(profile, grow=clearance, extend=BORE_EXTENSION, bore=True), rotation, np.array([0.0, 0.0, MODULE_HEIGHT]), depth)
+    try:
+        _offset_range(cavity)
+    except ValueError:
+        return False
+    return True
 
 
 def make_peg_hole_pair(seed: int, clearance: float = DEFAULT_CLEARANCE) -> tuple[Asset, Asset]:

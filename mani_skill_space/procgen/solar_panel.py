@@ -27,10 +27,11 @@ import trimesh
 from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, translation_frame
 from mani_skill_space.procgen.peg_hole import (
     BORE_EXTENSION,
-        DEFAULT_CLEARANCE,
+    DEFAULT_CLEARANCE,
     METAL_FRICTION,
     MODULE_COLOR,
     PegProfile,
+    check_clearance,
     make_peg,
     peg_points,
 )
@@ -47,6 +48,9 @@ MAX_SIDES = 8
 circles) would roll off their starting places on the flat ground."""
 POST_HALF_WIDTH = 0.025
 """The reference socket's 50 x 50 mm post."""
+PROFILE_RADIUS = (0.010, 0.016)
+PROFILE_ASPECT = (0.6, 1.0)
+"""Ranges of the procedural pegs' profile: circumradius (m) and the squash of the cross-section."""
 PEG_LENGTH_STEP = 0.1
 """A long peg is this much longer than a short one (reference: 0.1 and 0.2 m)."""
 
@@ -74,6 +78,26 @@ HANDLE_STANDOFF = 0.045
 PANEL_FRAME_COLOR = (0.72, 0.74, 0.77, 1.0)
 CELL_COLOR = (0.08, 0.12, 0.38, 1.0)
 HANDLE_COLOR = (0.15, 0.15, 0.16, 1.0)
+
+MIN_POST_WALL = RECEPTACLE_WALL
+"""The thinnest socket wall the generator makes: as thin as the panel's receptacle walls, the thinnest part the task
+already relies on (thinner convex slivers cook poorly and let a pushed peg through)."""
+
+
+def _max_clearance() -> float:
+    """The widest clearance (m) for which every procedural socket keeps ``MIN_POST_WALL`` walls. A bore is the
+    profile grown by the clearance with mitred corners: a corner of half-angle a moves out by clearance / sin(a). The
+    sharpest corner drawn is a triangle's, squashed across it to the smallest aspect s (tan a = s tan 30 deg); with
+    the squash across it, that corner stays at the largest radius R and can point straight at a post's side, so the
+    bore reaches R + clearance / sin(a) from the socket's centre."""
+    half_angle = np.arctan(PROFILE_ASPECT[0] * np.tan(np.pi / 6))
+    return float((POST_HALF_WIDTH - MIN_POST_WALL - PROFILE_RADIUS[1]) * np.sin(half_angle))
+
+
+MAX_CLEARANCE = _max_clearance()
+"""1.96 mm: a 16 mm triangle squashed to 0.6 grows its sharpest bore corner 3.06 mm per mm of clearance. Beyond the
+limit walls thin out, then the bore cuts through its post (the sharpest profiles from 2.9 mm; seed 0's octagon
+from 11 mm; at 30 mm only the floors are left)."""
 
 
 @dataclass(frozen=True)
@@ -105,22 +129,27 @@ class SolarLayout:
         return float(np.linalg.norm(self.profile.outline(), axis=1).max())
 
 
+def check_socket_clearance(clearance: float) -> float:
+    """``clearance`` as a float if the procedural sockets hold it: positive and at most ``MAX_CLEARANCE``."""
+    return check_clearance(clearance, MAX_CLEARANCE, f"every procedural socket keeps {MIN_POST_WALL * 1000:g} mm walls")
+
+
 def make_solar_layout(seed: int, clearance: float = DEFAULT_CLEARANCE) -> SolarLayout:
     rng = np.random.default_rng(int(seed))
     profile = PegProfile(
         sides=int(rng.integers(3, MAX_SIDES + 1)),
         circle=False,
-        radius=float(rng.uniform(0.010, 0.016)),
+        radius=float(rng.uniform(*PROFILE_RADIUS)),
         height=0.0,
         taper=0.0,
-        aspect=float(rng.uniform(0.6, 1.0)),
+        aspect=float(rng.uniform(*PROFILE_ASPECT)),
         aspect_angle=float(rng.uniform(0.0, np.pi)),
     )
     return SolarLayout(
         profile=profile,
         short_length=float(rng.uniform(0.09, 0.12)),
         depth=float(rng.uniform(0.02, 0.03)),
-        clearance=clearance,
+        clearance=check_socket_clearance(clearance),
         panel_scale=(float(rng.uniform(0.9, 1.1)), float(rng.uniform(0.9, 1.1))),
     )
 
