@@ -1,10 +1,14 @@
 """Speed of our envs against ManiSkill's own tasks, measured in the same run (ratios, not seconds).
 
+    mani-skill-space bench
     python -m mani_skill_space.bench
 
 Measures env steps/s (random ``pd_ee_delta_pose`` actions, physx_cpu, one env) in state and rgbd-64 modes,
 the time of a reconfigure (scene rebuild), and the generation time of each procedural asset. Each env is
 measured in several interleaved rounds and the median is reported, because these machines are noisy.
+
+The env ids, observation modes and counts are checked before anything is measured; a bad one is one line on stderr
+and exit status 2 (``--debug`` shows the traceback; see ``mani_skill_space.cli_support``).
 """
 
 from __future__ import annotations
@@ -14,14 +18,15 @@ import statistics
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import gymnasium as gym
-import tyro
 
 import mani_skill_space
+from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.domains import DOMAINS
+from mani_skill_space.envs import task_class
 from mani_skill_space.procgen.debris import make_debris
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
@@ -158,7 +163,21 @@ def format_report(report: Report) -> str:
     return "\n".join(lines)
 
 
+def check_args(args: Args) -> None:
+    """A ``ValueError`` naming the first bad input: an env id without a ManiSkill reference, an observation mode
+    the envs reject, a count below 1."""
+    for env_id in args.env_ids:
+        if env_id not in REFERENCES:
+            raise ValueError(f"no ManiSkill reference for env id {env_id!r}; valid choices: {', '.join(REFERENCES)}")
+        for obs_mode in args.obs_modes:
+            task_class(env_id).check_task_kwargs(obs_mode=obs_mode)
+    for name, value in (("--steps", args.steps), ("--rounds", args.rounds), ("--reconfigures", args.reconfigures), ("--asset-repeats", args.asset_repeats)):
+        check_at_least(name, value, 1)
+
+
 def main(args: Args) -> Report:
+    with checking_inputs():
+        check_args(args)
     report = Report()
     for env_id in args.env_ids:
         bench_env(env_id, args, report)
@@ -170,5 +189,10 @@ def main(args: Args) -> Report:
     return report
 
 
+def cli(argv: Optional[Sequence[str]] = None) -> None:
+    """``mani-skill-space bench ARGS`` (and ``python -m mani_skill_space.bench ARGS``)."""
+    run_cli("bench", tyro_parser(Args, "bench", __doc__), main, argv)
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    cli()

@@ -1,5 +1,6 @@
 """Generate motion-planning demonstrations with the tasks' oracles, recorded in ManiSkill's trajectory format.
 
+    mani-skill-space demos -e SampleCollection-v1 -n 100 --env-kwargs '{"domain": "mars"}'
     python -m mani_skill_space.demos -e SampleCollection-v1 -n 100 --env-kwargs '{"domain": "mars"}'
 
 The flags mirror ManiSkill's ``mani_skill.examples.motionplanning.panda.run``, plus ``--env-kwargs`` (a JSON
@@ -11,6 +12,10 @@ registered), e.g. ``-c pd_ee_delta_pose -o state --save-traj``.
 
 With several processes, process i takes seeds seed_start + i, seed_start + i + procs, ... (disjoint), and
 the per-process files are merged with ManiSkill's ``merge_trajectories``.
+
+The env id, ``--env-kwargs`` (names and values, as the env checks them) and the counts are checked before any
+worker starts; a bad one is one line on stderr and exit status 2 (``--debug`` shows the traceback; see
+``mani_skill_space.cli_support``).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import time
 from dataclasses import dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Optional, Sequence
 
 import gymnasium as gym
 import tyro
@@ -29,8 +34,23 @@ from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
 from tqdm import tqdm
 
+from mani_skill_space.cli_support import check_at_least, checking_inputs, parse_json_object, run_cli, tyro_parser
+from mani_skill_space.envs import task_class
 from mani_skill_space.oracles import ORACLES, oracle_for
 from mani_skill_space.rollout import run_episode
+from mani_skill_space.suites import check_env_kwargs
+
+SET_BY_THE_GENERATOR = (
+    "obs_mode",
+    "control_mode",
+    "reward_mode",
+    "render_mode",
+    "sim_backend",
+    "sensor_configs",
+    "human_render_camera_configs",
+    "viewer_camera_configs",
+)
+"""Env kwargs the generator sets itself (from its flags, or the oracle's control mode): not for ``--env-kwargs``."""
 
 
 @dataclass
@@ -115,10 +135,24 @@ def generate(args: Args, proc_id: int = 0) -> Outcome:
     return Outcome(path, attempts, successes, saved)
 
 
-def main(args: Args) -> Outcome:
+def check_args(args: Args) -> None:
+    """A ``ValueError`` naming the first bad input: an env id without an oracle, ``--env-kwargs`` that is not a
+    JSON object or that the env rejects (names and values), a count below 1."""
     if args.env_id not in ORACLES:
-        raise ValueError(f"No oracle for {args.env_id!r}; oracles exist for: {', '.join(ORACLES)}")
-    json.loads(args.env_kwargs)  # fail early on malformed JSON
+        raise ValueError(f"no oracle for env id {args.env_id!r}; valid choices: {', '.join(ORACLES)}")
+    check_at_least("--num-traj", args.num_traj, 1)
+    check_at_least("--num-procs", args.num_procs, 1)
+    check_at_least("--seed-start", args.seed_start, 0)
+    kwargs = parse_json_object(args.env_kwargs, "--env-kwargs")
+    for key in kwargs:
+        if key in SET_BY_THE_GENERATOR:
+            raise ValueError(f"--env-kwargs cannot set {key!r}: the demo generator sets it (from its own flags or the oracle)")
+    check_env_kwargs(task_class(args.env_id), dict(kwargs, obs_mode=args.obs_mode, reward_mode=args.reward_mode))
+
+
+def main(args: Args) -> Outcome:
+    with checking_inputs():
+        check_args(args)
     start = time.perf_counter()
     args = replace(args, traj_name=args.traj_name or time.strftime("%Y%m%d_%H%M%S"))
     procs = max(1, min(args.num_procs, args.num_traj))
@@ -142,5 +176,10 @@ def main(args: Args) -> Outcome:
     return outcome
 
 
+def cli(argv: Optional[Sequence[str]] = None) -> None:
+    """``mani-skill-space demos ARGS`` (and ``python -m mani_skill_space.demos ARGS``)."""
+    run_cli("demos", tyro_parser(Args, "demos", __doc__), main, argv)
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    cli()

@@ -1,5 +1,6 @@
 """Evaluate policies on a benchmark suite.
 
+    mani-skill-space eval --suite smoke --policy oracle random
     python -m mani_skill_space.eval --suite tasks/smoke.toml --policy oracle random
 
 Every configuration of the suite runs its episodes (one seed each, seeds from the suite) in worker processes
@@ -10,10 +11,14 @@ table is also printed. The same suite and policies give the same numbers.
 
 Policies: ``random``, ``zero``, ``oracle`` (the motion-planning solution of each task) or ``module:callable``
 (see ``mani_skill_space.policies``). A policy with a ``control_mode`` gets its env made in that mode.
+
+The suite (its env ids and kwargs), the policies and the counts are checked before any worker starts; a bad one is
+one line on stderr and exit status 2 (``--debug`` shows the traceback; see ``mani_skill_space.cli_support``).
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -21,14 +26,14 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 import gymnasium as gym
 import imageio.v2 as imageio
 import numpy as np
-import tyro
 from tqdm import tqdm
 
+from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
 from mani_skill_space.metrics import EpisodeResult, summarize
 from mani_skill_space.policies import load_policy
 from mani_skill_space.rollout import evaluation_env_kwargs, run_episode
@@ -38,7 +43,7 @@ from mani_skill_space.suites import Configuration, Suite, load_suite
 @dataclass
 class Args:
     suite: Path
-    """A suite file, e.g. tasks/smoke.toml."""
+    """A suite: the name of a shipped suite (e.g. smoke) or the path of a .toml file."""
     policy: tuple[str, ...] = ("oracle",)
     """One or more policies: random, zero, oracle, checkpoint:PATH or module:callable."""
     output_dir: Path = Path("outputs/eval")
@@ -105,9 +110,34 @@ def plan_chunks(suite: Suite, policies: tuple[str, ...], args: Args) -> list[Chu
     return chunks
 
 
-def evaluate(suite: Suite, args: Args) -> dict:
+def check_policy(spec: str) -> None:
+    """Load the policy ``spec`` names, as the workers will: a ``ValueError`` or ``OSError`` when it names no policy
+    (an unknown name, a ``module:callable`` that does not import or exist, a missing checkpoint)."""
+    module_name, colon, attribute = spec.partition(":")
+    if colon and module_name != "checkpoint":
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as error:
+            raise ValueError(f"policy {spec!r}: cannot import module {module_name!r} ({error})") from None
+        if not hasattr(module, attribute):
+            raise ValueError(f"policy {spec!r}: module {module_name!r} has no {attribute!r}")
+    load_policy(spec)
+
+
+def check_args(args: Args) -> Suite:
+    """The suite ``args`` name, loaded and checked (env ids and kwargs), after checking the policies and counts."""
+    check_at_least("--num-workers", args.num_workers, 1)
+    check_at_least("--video", args.video, 0)
+    check_at_least("--episodes", args.episodes, 1)
+    if not args.policy:
+        raise ValueError("--policy needs at least one policy: random, zero, oracle, checkpoint:PATH or module:callable")
+    suite = load_suite(args.suite)
     for policy in args.policy:
-        load_policy(policy)  # fail early on a bad policy spec
+        check_policy(policy)
+    return suite
+
+
+def evaluate(suite: Suite, args: Args) -> dict:
     chunks = plan_chunks(suite, args.policy, args)
     results: dict[tuple[str, str], list[EpisodeResult]] = {}
     with ProcessPoolExecutor(max_workers=args.num_workers, mp_context=get_context("spawn")) as pool:
@@ -162,7 +192,8 @@ def _slug(name: str) -> str:
 
 
 def main(args: Args) -> dict:
-    suite = load_suite(args.suite)
+    with checking_inputs():
+        suite = check_args(args)
     report = evaluate(suite, args)
     output = args.output_dir
     output.mkdir(parents=True, exist_ok=True)
@@ -174,5 +205,10 @@ def main(args: Args) -> dict:
     return report
 
 
+def cli(argv: Optional[Sequence[str]] = None) -> None:
+    """``mani-skill-space eval ARGS`` (and ``python -m mani_skill_space.eval ARGS``)."""
+    run_cli("eval", tyro_parser(Args, "eval", __doc__), main, argv)
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    cli()

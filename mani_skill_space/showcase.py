@@ -1,5 +1,6 @@
 """Roll out every env in each of its domains and asset sources; write a picture grid and a video per domain.
 
+    mani-skill-space showcase --output-dir outputs/showcase
     python -m mani_skill_space.showcase --output-dir outputs/showcase
 
 The picture (``first_frames.png``) has one row per env x domain and one column per asset source, each the
@@ -9,22 +10,26 @@ policy (a fixed seed, so the same command gives the same pictures).
 ``procedural_variety()`` draws many procedural assets side by side (rocks, peg and hole pairs, debris, solar
 panel sets), rendered offscreen with their own materials; ``assets/readme/make_pictures.py`` makes the README's
 pictures with both.
+
+The env ids and sizes are checked before anything is rendered; a bad one is one line on stderr and exit status 2
+(``--debug`` shows the traceback; see ``mani_skill_space.cli_support``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional, Sequence
 
 import gymnasium as gym
 import imageio.v2 as imageio
 import numpy as np
 import sapien
-import tyro
 from PIL import Image, ImageDraw
 from tqdm import tqdm
 
 import mani_skill_space
+from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
 from mani_skill_space.envs import task_class
 from mani_skill_space.envs.building import render_shape
 from mani_skill_space.procgen.asset import Asset, VisualPart, box_mesh, look_at
@@ -191,7 +196,18 @@ def _add_visual(scene: sapien.Scene, asset: Asset, pose: np.ndarray, offset: np.
     scene.add_entity(entity)
 
 
+def check_args(args: Args) -> None:
+    """A ``ValueError`` naming the first bad input: an env id that is not ours, a size or rate below 1."""
+    for env_id in args.env_ids:
+        task_class(env_id)
+    check_at_least("--steps", args.steps, 0)
+    check_at_least("--image-size", args.image_size, 1)
+    check_at_least("--fps", args.fps, 1)
+
+
 def main(args: Args) -> None:
+    with checking_inputs():
+        check_args(args)
     args.output_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     jobs = [(env_id, domain) for env_id in args.env_ids for domain in task_class(env_id).SUPPORTED_DOMAINS]
@@ -210,5 +226,10 @@ def main(args: Args) -> None:
     print(f"picture: {picture}")
 
 
+def cli(argv: Optional[Sequence[str]] = None) -> None:
+    """``mani-skill-space showcase ARGS`` (and ``python -m mani_skill_space.showcase ARGS``)."""
+    run_cli("showcase", tyro_parser(Args, "showcase", __doc__), main, argv)
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    cli()
