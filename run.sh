@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # mani-skill-space developer entry point. Sets everything up (idempotent, quick when already done), then:
 #   bash run.sh main [args]   run the main job: the oracle and random policies on the smoke suite
-#                             (python -m mani_skill_space.eval --suite tasks/smoke.toml --policy oracle random)
+#                             (python -m mani_skill_space.eval --suite smoke --policy oracle random)
 #   bash run.sh test [args]   run the test suite (pytest)
 #   bash run.sh setup         only set up
 # Setup: system packages on Debian 12 (python3-venv; the software Vulkan driver only when SAPIEN finds no
@@ -93,7 +93,7 @@ command=${1:-main}
 [ $# -gt 0 ] && shift
 case "$command" in
     setup) setup ;;
-    main) setup; exec "$PY" -m mani_skill_space.eval --suite tasks/smoke.toml --policy oracle random "$@" ;;
+    main) setup; exec "$PY" -m mani_skill_space.eval --suite smoke --policy oracle random "$@" ;;
     test) setup; exec "$PY" -m pytest "$@" ;;
     *) echo "usage: bash run.sh [main|test|setup] [args...]" >&2; exit 2 ;;
 esac
