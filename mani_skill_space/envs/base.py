@@ -106,6 +106,7 @@ class SpaceManipulationEnv(BaseEnv):
         self.domain = get_domain(checked["domain"], self.SUPPORTED_DOMAINS)
         self.asset_source = checked["asset_source"]
         self.robot_init_qpos_noise = checked["robot_init_qpos_noise"]
+        self._wrist_wrench_reading: Optional[torch.Tensor] = None
         self.mount = self._make_mount()
         reconfiguration_freq = checked["reconfiguration_freq"]
         if reconfiguration_freq is None:
@@ -331,12 +332,68 @@ class SpaceManipulationEnv(BaseEnv):
         return ((qpos - limits[..., 0]) / (limits[..., 1] - limits[..., 0])).mean(dim=-1)
 
     def time_remaining(self) -> torch.Tensor:
+        """Fraction of the episode left, from the elapsed steps (which the env's state carries)."""
         limit = self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.nominal_episode_steps()
         return 1.0 - self.elapsed_steps.float() / limit
 
     def wrist_wrench(self) -> torch.Tensor:
-        """Spatial force (force, torque) the wrist joint transmits to the hand: what a wrist F/T sensor measures."""
-        return self.agent.robot.get_link_incoming_joint_forces()[:, self._wrist_link_index].to(self.device)
+        """Spatial force (force, torque) the wrist joint transmitted to the hand in the last physics step: what a
+        wrist F/T sensor measures. Read after every control step and kept with the env's state (the simulation
+        state cannot restore forces); zero at the start of an episode, before any physics step."""
+        return self._wrist_wrench_buffer().clone()
+
+    def _wrist_wrench_buffer(self) -> torch.Tensor:
+        """The (num_envs, 6) wrench reading, made on first use (the first reset of ``__init__``)."""
+        if self._wrist_wrench_reading is None:
+            self._wrist_wrench_reading = torch.zeros((self.num_envs, 6), device=self.device)
+        return self._wrist_wrench_reading
+
+    def _after_control_step(self):
+        super()._after_control_step()
+        self._wrist_wrench_buffer()[:] = self.agent.robot.get_link_incoming_joint_forces()[:, self._wrist_link_index].to(self.device)
+
+    def _clear_sim_state(self):
+        """Also forgets the wrench reading of the envs being reset (the previous episode's last physics step)."""
+        super()._clear_sim_state()
+        self._wrist_wrench_buffer()[self.scene._reset_mask] = 0.0
+
+    # ------------------------------------------------------------------ state
+    def get_state_dict(self) -> dict:
+        """ManiSkill's state (simulation and controller) plus, under ``"task"``, what the observation reads besides
+        the simulation: the elapsed steps (the remaining time, and what the time limit counts) and the wrist wrench
+        of the last physics step. Tasks that track more across steps add their entries to ``"task"``. Every entry
+        is a (num_envs, k) float tensor, as ManiSkill's trajectory files store states."""
+        state = super().get_state_dict()
+        state["task"] = dict(elapsed_steps=self._elapsed_steps[:, None].float(), wrist_wrench=self._wrist_wrench_buffer().clone())
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: Optional[torch.Tensor] = None):
+        """Restores what ``get_state_dict`` recorded; as in ManiSkill, with ``env_idx`` the state's rows are those
+        envs'. A state without the ``"task"`` entries (from ManiSkill's tools, or recorded by an older version)
+        restores the simulation and leaves the elapsed steps and the wrench reading as they are."""
+        super().set_state_dict(state, env_idx)
+        task = self._task_state_of(state)
+        rows = slice(None) if env_idx is None else env_idx
+        if "elapsed_steps" in task:
+            self._elapsed_steps[rows] = task["elapsed_steps"][:, 0].round().to(self._elapsed_steps.dtype)
+        if "wrist_wrench" in task:
+            self._wrist_wrench_buffer()[rows] = task["wrist_wrench"]
+
+    def set_state(self, state: torch.Tensor, env_idx: Optional[torch.Tensor] = None):
+        """Restores a flat ``get_state()`` vector. ManiSkill 3.0.1's version rebuilds only the actors and
+        articulations from it and drops the rest of what ``get_state`` flattened; this one cuts the vector along the
+        layout of ``get_state_dict()`` (ManiSkill's flattening order), so the flat state restores as much as the dict."""
+        state = torch.as_tensor(state, device=self.device)
+        state_dict, width = _unflattened_like(self.get_state_dict(), state.reshape(-1, state.shape[-1]))
+        if width != state.shape[-1]:
+            raise ValueError(f"a flat state of this env has {width} columns (the layout of get_state_dict()), got {state.shape[-1]}")
+        self.set_state_dict(state_dict, env_idx)
+
+    def _task_state_of(self, state: dict) -> dict[str, torch.Tensor]:
+        """The ``"task"`` entries of a state dict as (rows, k) float tensors on the env's device (none without one);
+        as in ManiSkill, a 1-D entry is one env's (a trajectory file's state at one step)."""
+        entries = {key: torch.as_tensor(value, device=self.device).float() for key, value in state.get("task", {}).items()}
+        return {key: value[None] if value.ndim == 1 else value for key, value in entries.items()}
 
 
 class RestingPlacement:
@@ -374,6 +431,20 @@ def socket_clearance(clearance: Any, asset_source: str, check: Callable[[Any], f
     if clearance is not None and asset_source == "dataset":
         raise KwargError("clearance", "clearance applies to procedural assets only; the dataset sockets have a fixed 1 mm clearance")
     return DEFAULT_CLEARANCE if clearance is None else check(clearance)
+
+
+def _unflattened_like(template: dict, flat: torch.Tensor, start: int = 0) -> tuple[dict, int]:
+    """``flat``'s columns from ``start`` cut into a dict shaped like ``template`` (nested dicts of (n, k) or (n,)
+    tensors), in the order ManiSkill's ``flatten_state_dict`` joins them; also the column after the last one used."""
+    result = {}
+    for key, value in template.items():
+        if isinstance(value, dict):
+            result[key], start = _unflattened_like(value, flat, start)
+        else:
+            width = 1 if value.ndim == 1 else value.shape[-1]
+            result[key] = flat[:, start : start + width]
+            start += width
+    return result, start
 
 
 @lru_cache

@@ -178,10 +178,10 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         self._calm_steps = torch.where(calm, self._calm_steps + 1, torch.zeros_like(self._calm_steps))
 
     def get_state_dict(self):
-        """The simulation state plus what the task tracks across steps (the debris' last pose and measured
-        velocities, how long it has been held calm), so that restoring a state restores its evaluation."""
+        """The base class's state plus, under ``"task"``, what this task tracks across steps (the debris' last pose
+        and measured velocities, how long it has been held calm), so that restoring a state restores its evaluation."""
         state = super().get_state_dict()
-        state["task"] = dict(
+        state["task"].update(
             last_debris_pose=self._last_debris_pose.clone(),
             debris_velocity=self._debris_velocity.clone(),
             debris_spin_velocity=self._debris_spin_velocity.clone(),
@@ -191,15 +191,15 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
         super().set_state_dict(state, env_idx)
-        if "task" not in state:  # a bare simulation state: measure from here on
-            self._last_debris_pose = self.debris.pose.raw_pose.clone()
-            return
-        task = {k: torch.as_tensor(v, device=self.device).reshape(self.num_envs, -1) for k, v in state["task"].items()}
+        task = self._task_state_of(state)
         rows = slice(None) if env_idx is None else env_idx
-        self._last_debris_pose[rows] = task["last_debris_pose"][rows].float()
-        self._debris_velocity[rows] = task["debris_velocity"][rows].float()
-        self._debris_spin_velocity[rows] = task["debris_spin_velocity"][rows].float()
-        self._calm_steps[rows] = task["calm_steps"][rows, 0].round().int()
+        if "last_debris_pose" not in task:  # a state without the debris' history: measure from here on
+            self._last_debris_pose[rows] = self.debris.pose.raw_pose[rows].clone()
+            return
+        self._last_debris_pose[rows] = task["last_debris_pose"]
+        self._debris_velocity[rows] = task["debris_velocity"]
+        self._debris_spin_velocity[rows] = task["debris_spin_velocity"]
+        self._calm_steps[rows] = task["calm_steps"][:, 0].round().int()
 
     def _debris_speed(self) -> torch.Tensor:
         return torch.linalg.norm(self._debris_velocity, dim=-1)
