@@ -1,14 +1,26 @@
-"""A wheel built from the repo, installed in a fresh venv outside the repo, makes every env with every
-domain and asset source: static assets and textures ship inside the wheel."""
+"""The wheel built from the repo ships every module, suite and asset. Installed in a fresh venv outside the repo, its
+``mani-skill-space`` command runs the main job on the packaged smoke suite, records a demonstration and converts
+it to ``pd_ee_delta_pose``, from a directory outside the repo; and it makes every env with every domain and asset
+source."""
 
+import json
+import os
 import subprocess
 import sys
 import textwrap
+import zipfile
 from pathlib import Path
 
+import h5py
 import pytest
 
+from mani_skill_space.suites import load_suite
+
 REPO = Path(__file__).resolve().parents[1]
+PACKAGE_FOLDERS = {"mani_skill_space": REPO / "mani_skill_space", "mani_skill_space/assets": REPO / "assets", "mani_skill_space/tasks": REPO / "tasks"}
+"""Where the wheel's folders come from (setup.cfg's ``package_dir``): every file in them ships, but for ``NOT_SHIPPED``."""
+NOT_SHIPPED = (REPO / "assets" / "readme",)
+"""The README's pictures and the script that makes them."""
 
 CHECK = textwrap.dedent(
     """
@@ -31,19 +43,91 @@ CHECK = textwrap.dedent(
 )
 
 
-@pytest.mark.slow
-def test_wheel_installed_outside_the_repo_makes_every_env(tmp_path):
-    subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp_path / "dist"), str(REPO)], check=True, capture_output=True)
-    (wheel,) = (tmp_path / "dist").glob("mani_skill_space-*.whl")
-    venv = tmp_path / "venv"
+@pytest.fixture(scope="session")
+def wheel(tmp_path_factory) -> Path:
+    dist = tmp_path_factory.mktemp("dist")
+    subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(dist), str(REPO)], check=True, capture_output=True)
+    (built,) = dist.glob("mani_skill_space-*.whl")
+    return built
+
+
+@pytest.fixture(scope="session")
+def installed(wheel, tmp_path_factory) -> Path:
+    """The ``bin`` folder of a fresh venv outside the repo with the wheel installed (torch first: its CPU build)."""
+    venv = tmp_path_factory.mktemp("venv")
+    assert not venv.is_relative_to(REPO)
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
     pip = [str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "-c", str(REPO / "constraints.txt")]
     subprocess.run(pip + ["torch==2.13.0"], check=True, capture_output=True)
     subprocess.run(pip + [str(wheel)], check=True, capture_output=True)
-    result = subprocess.run(
-        [str(venv / "bin" / "python"), "-c", CHECK.replace("REPO", repr(str(REPO)))], cwd=tmp_path, capture_output=True, text=True
-    )
-    assert result.returncode == 0, result.stderr[-3000:]
+    return venv / "bin"
+
+
+def _run(command: list, cwd: Path) -> subprocess.CompletedProcess:
+    """Run a command of the installed venv from ``cwd`` (outside the repo), with nothing of the repo on the path."""
+    env = {key: value for key, value in os.environ.items() if key not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    result = subprocess.run([str(part) for part in command], cwd=cwd, env=env, capture_output=True, text=True)
+    assert result.returncode == 0, f"{' '.join(map(str, command))} failed:\n{result.stderr[-3000:]}"
+    return result
+
+
+def _source_files() -> set[str]:
+    """The wheel path of every file in the package folders that must ship."""
+    files = set()
+    for package, folder in PACKAGE_FOLDERS.items():
+        for path in folder.rglob("*"):
+            if path.is_file() and "__pycache__" not in path.parts and not any(path.is_relative_to(skip) for skip in NOT_SHIPPED):
+                files.add(f"{package}/{path.relative_to(folder).as_posix()}")
+    return files
+
+
+def test_the_wheel_ships_every_module_suite_and_asset_and_the_command(wheel):
+    with zipfile.ZipFile(wheel) as archive:
+        shipped = set(archive.namelist())
+        (entry_points,) = [name for name in shipped if name.endswith(".dist-info/entry_points.txt")]
+        console_scripts = archive.read(entry_points).decode()
+    missing = _source_files() - shipped
+    assert not missing, f"left out of the wheel (a folder without __init__.py, or package data setup.cfg does not list): {sorted(missing)}"
+    assert {"mani_skill_space/oracles/__init__.py", "mani_skill_space/tasks/smoke.toml"} <= shipped
+    assert not [name for name in shipped if name.startswith("mani_skill_space/assets/readme")]
+    assert "mani-skill-space = mani_skill_space.cli:main" in console_scripts
+
+
+@pytest.mark.slow
+def test_installed_command_evaluates_the_packaged_smoke_suite_outside_the_repo(installed, tmp_path):
+    _run([installed / "mani-skill-space", "eval", "--suite", "smoke", "--policy", "oracle", "random", "--episodes", "1", "--output-dir", "eval"], tmp_path)
+    report = json.loads((tmp_path / "eval" / "results.json").read_text())
+    assert Path(report["suite_file"]).is_relative_to(installed.parent), report["suite_file"]
+    smoke = load_suite(REPO / "tasks" / "smoke.toml")
+    first_seeds = {c.name: [c.seed_start] for c in smoke.configurations}
+    assert sorted((row["configuration"], row["policy"]) for row in report["rows"]) == sorted((c, p) for c in first_seeds for p in ("oracle", "random"))
+    for row in report["rows"]:
+        assert row["status"] == "ok" and [e["seed"] for e in row["episodes"]] == first_seeds[row["configuration"]], row
+    oracle = [row["summary"]["success_once"] for row in report["rows"] if row["policy"] == "oracle"]
+    assert sum(oracle) >= len(oracle) / 2, "the oracles solve most configurations (24 of 28 when this test was written)"
+
+
+@pytest.mark.slow
+def test_installed_command_records_a_demonstration_and_converts_it_outside_the_repo(installed, tmp_path):
+    command = installed / "mani-skill-space"
+    _run([command, "demos", "-e", "PegInHoleAssembly-v1", "-n", "1", "--record-dir", "demos", "--traj-name", "demo"], tmp_path)
+    recorded = tmp_path / "demos" / "PegInHoleAssembly-v1" / "motionplanning" / "demo.h5"
+    assert recorded.is_file() and len(json.loads(recorded.with_suffix(".json").read_text())["episodes"]) == 1
+    # --allow-failure: keep the converted episode whether or not it still succeeds (conversion success is measured in the README)
+    _run([command, "replay", "--traj-path", recorded, "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj", "--allow-failure"], tmp_path)
+    converted = recorded.with_name("demo.state.pd_ee_delta_pose.physx_cpu.h5")
+    metadata = json.loads(converted.with_suffix(".json").read_text())
+    assert metadata["env_info"]["env_kwargs"]["control_mode"] == "pd_ee_delta_pose"
+    with h5py.File(converted) as trajectories:
+        assert list(trajectories) == ["traj_0"]
+        actions, observations = trajectories["traj_0"]["actions"], trajectories["traj_0"]["obs"]
+        assert actions.shape[0] > 0 and actions.shape[1] == 7  # 6-D delta pose + gripper
+        assert observations.shape[0] == actions.shape[0] + 1
+
+
+@pytest.mark.slow
+def test_wheel_installed_outside_the_repo_makes_every_env(installed, tmp_path):
+    result = _run([installed / "python", "-c", CHECK.replace("REPO", repr(str(REPO)))], tmp_path)
     import mani_skill_space
     from mani_skill_space.envs import task_class
 
