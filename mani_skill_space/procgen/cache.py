@@ -2,7 +2,10 @@
 
 Several worker processes (e.g. ``AsyncVectorEnv``) may build the same entry at once: each writes a private
 temporary file and atomically renames it into place, so a reader sees either nothing or a whole entry. Every
-entry stores a checksum of its arrays; an entry that fails to load or verify is rebuilt, not trusted.
+entry stores a checksum of its arrays; an entry that fails to load or verify is rebuilt, not trusted. Entries are
+readable by everyone (mode 0644), so a cache can be shared by a group. A cache that cannot be written (a read-only
+or uncreatable directory) costs time, not results: the rebuilt arrays are returned uncached, with a warning (once
+per directory).
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Callable
@@ -17,6 +21,11 @@ from typing import Callable
 import numpy as np
 
 CHECKSUM_KEY = "__sha256__"
+ENTRY_MODE = 0o644
+"""Entries are written by their owner and readable by everyone (tempfile would make them private, 0600)."""
+
+_UNWRITABLE_DIRECTORIES: set[Path] = set()
+"""Cache directories already warned about (one warning per directory and process)."""
 
 
 def default_cache_dir() -> Path:
@@ -55,7 +64,12 @@ class ArrayCache:
         if cached is not None:
             return cached
         arrays = {name: np.asarray(value) for name, value in build().items()}
-        self.store(key, arrays)
+        try:
+            self.store(key, arrays)
+        except OSError as error:
+            if self.directory not in _UNWRITABLE_DIRECTORIES:
+                _UNWRITABLE_DIRECTORIES.add(self.directory)
+                warnings.warn(f"cannot write the asset cache {self.directory} ({error}); using uncached results (set MANI_SKILL_SPACE_CACHE to a writable folder)", stacklevel=2)
         return arrays
 
     def load(self, key: str) -> dict[str, np.ndarray] | None:
@@ -77,6 +91,7 @@ class ArrayCache:
         payload[CHECKSUM_KEY] = np.array(arrays_checksum(arrays))
         handle, temporary = tempfile.mkstemp(dir=self.directory, prefix=f".{key}.", suffix=".tmp")
         try:
+            os.fchmod(handle, ENTRY_MODE)
             with os.fdopen(handle, "wb") as stream:
                 np.savez(stream, **payload)
                 stream.flush()

@@ -1,6 +1,9 @@
 import multiprocessing as mp
+import stat
+import tempfile
 
 import numpy as np
+import pytest
 import trimesh
 
 from mani_skill_space.procgen.cache import ArrayCache
@@ -80,3 +83,36 @@ def test_coacd_decomposition_covers_a_nonconvex_mesh_and_is_cached(tmp_path):
     assert len(list(cache.directory.glob("*.npz"))) == 1
     again = convex_decomposition(mesh, cache=cache)
     assert [p.vertices.tobytes() for p in again] == [p.vertices.tobytes() for p in parts]
+
+
+def test_entries_are_readable_by_a_shared_group(tmp_path):
+    cache = ArrayCache("modes", tmp_path)
+    cache.get_or_create("k", _build_arrays)
+    assert stat.S_IMODE(cache.path("k").stat().st_mode) == 0o644
+
+
+def test_an_uncreatable_cache_directory_gives_the_built_arrays_with_one_warning(tmp_path):
+    blocker = tmp_path / "not_a_directory"
+    blocker.write_text("a file where the cache directory should be")
+    cache = ArrayCache("uncreatable", blocker)
+    with pytest.warns(UserWarning, match="cannot write the asset cache") as warned:
+        first = cache.get_or_create("a", _build_arrays)
+        second = cache.get_or_create("b", _build_arrays)
+    assert len(warned) == 1, "one warning per directory"
+    for arrays in (first, second):
+        np.testing.assert_array_equal(arrays["vertices"], _build_arrays()["vertices"])
+
+
+def test_a_read_only_cache_with_a_corrupt_entry_gives_the_built_arrays(tmp_path, monkeypatch):
+    cache = ArrayCache("read_only", tmp_path)
+    cache.get_or_create("k", _build_arrays)
+    cache.path("k").write_bytes(b"corrupt")
+
+    def read_only_directory(*args, **kwargs):  # what mkstemp meets in a directory without write permission
+        raise PermissionError(13, "Permission denied", str(cache.directory))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only_directory)
+    with pytest.warns(UserWarning, match=r"cannot write the asset cache .*Permission denied"):
+        arrays = cache.get_or_create("k", _build_arrays)
+    np.testing.assert_array_equal(arrays["vertices"], _build_arrays()["vertices"])
+    assert cache.path("k").read_bytes() == b"corrupt", "nothing was written"
