@@ -348,6 +348,23 @@ class SpaceManipulationEnv(BaseEnv):
             self._wrist_wrench_reading = torch.zeros((self.num_envs, 6), device=self.device)
         return self._wrist_wrench_reading
 
+    # ------------------------------------------------------------------ latches
+    def _latch_forces(self) -> list[tuple[Any, torch.Tensor]]:
+        """(actor, (num_envs, 3) force) pairs that the task's latches apply at every physics step of the coming
+        control step (e.g. a socket holding a seated peg): none by default."""
+        return []
+
+    def _before_control_step(self):
+        super()._before_control_step()
+        # measured once per control step, so that the CPU and GPU simulations (whose poses are fetched once per
+        # control step) apply the same forces
+        self._pending_latch_forces = self._latch_forces()
+
+    def _before_simulation_step(self):
+        super()._before_simulation_step()
+        for actor, force in getattr(self, "_pending_latch_forces", ()):
+            apply_force(actor, force)
+
     def _after_control_step(self):
         super()._after_control_step()
         self._wrist_wrench_buffer()[:] = self.agent.robot.get_link_incoming_joint_forces()[:, self._wrist_link_index].to(self.device)
@@ -415,6 +432,16 @@ class RestingPlacement:
         """Height (b,) of the object's origin that puts its lowest point ``clearance`` above z = 0."""
         lowest = torch.einsum("bij,bnj->bni", quaternion_to_matrix(quaternion), self.points[env_idx])[..., 2].amin(dim=1)
         return clearance - lowest
+
+
+def apply_force(actor, force: torch.Tensor) -> None:
+    """Apply ``force`` (num_envs, 3), in Newtons at the centre of mass, to a per-env actor for the next physics
+    step: ManiSkill's ``Actor.apply_force`` on the GPU; body by body on the CPU (where it takes one vector)."""
+    if actor.scene.gpu_sim_enabled:
+        actor.apply_force(force)
+        return
+    for body, body_force in zip(actor._bodies, force.cpu().numpy()):
+        body.add_force_at_point(force=body_force, point=(body.entity_pose * body.cmass_local_pose).p)
 
 
 def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:

@@ -15,6 +15,12 @@ the same geometry:
 
 Success is the same in both tasks: an insertable end at least ``INSERTED_FRACTION`` of the depth in, within
 the peg's radius of the hole's axis, and the axes aligned within ``ALIGNMENT_TOLERANCE``.
+
+Sockets latch (both tasks, every domain): a peg that counts as inserted is pulled toward the hole's bottom along
+its axis with ``LATCH_ACCELERATION`` and damped by ``LATCH_DAMPING`` (``latch_force``), the way real orbital
+hardware holds parts with a detent; in orbit a released peg would otherwise drift out of its 1 mm clearance.
+The force is applied to the peg's body at every physics step (``SpaceManipulationEnv._latch_forces``), on the
+CPU and GPU simulators alike; no body or joint is added.
 """
 
 from __future__ import annotations
@@ -42,6 +48,21 @@ reference (a fixed heading +- pi/16). Lying across, a grasp of its side would tu
 the rover's front."""
 LYING_AXIS = np.array([0.0, 0.0, 1.0])
 """A peg lies on a side, never on an end: its axis (z) is never the resting direction."""
+
+
+LATCH_ACCELERATION = 9.81
+"""m/s^2: a socket's latch pulls a seated part into its seat as hard as Earth's gravity would pull it down (about
+1 N for a 0.1 kg peg): enough to keep a released part seated in orbit, far less than the arm can pull."""
+LATCH_DAMPING = 10.0
+"""1/s: the latch also damps the seated part's motion (a detent's friction), so a released part settles."""
+
+
+def latch_force(engaged: torch.Tensor, into_seat: torch.Tensor, velocity: torch.Tensor, mass: torch.Tensor) -> torch.Tensor:
+    """Force (..., 3) of a latch on a part: where ``engaged`` (...), the part's ``mass`` (...) times
+    ``LATCH_ACCELERATION`` along ``into_seat`` (..., 3, unit) less ``LATCH_DAMPING`` times its ``velocity``
+    (..., 3); zero elsewhere (a part that is not seated is not captured)."""
+    force = mass[..., None] * (LATCH_ACCELERATION * into_seat - LATCH_DAMPING * velocity)
+    return torch.where(engaged[..., None], force, torch.zeros_like(force))
 
 
 def insertion_terms(prefix: str = "") -> tuple[RewardTerm, ...]:

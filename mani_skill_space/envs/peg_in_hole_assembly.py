@@ -16,6 +16,7 @@ from mani_skill_space.envs.insertion import (
     insertion_terms,
     is_aligned,
     is_inserted,
+    latch_force,
     lying_peg_orientation,
     peg_placement,
 )
@@ -57,6 +58,10 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     - an insertable end of the peg is inside the hole at least 90% of its depth: its tip within 10% of the
       depth from the hole's bottom along the hole's axis, and within the peg's radius of that axis
     - the peg's axis is aligned with the hole's axis within 5 deg
+
+    **Latch:** the hole holds a peg that meets both conditions: it pulls the peg toward its bottom as hard as
+    1 g would, damping its motion (`envs.insertion.latch_force`), so that in orbit a released peg stays in.
+    It never captures a peg that is not inserted.
 
     **Reward:** dense terms (`REWARD_TABLE`, reported in `info["reward_terms"]`) of the reference: reach
     1/0.25, grasp 4, lift 8 (0.05-0.55 m, falloff 0.05), axis alignment 8 (1 - cos of the angle, /0.5), twist
@@ -127,6 +132,13 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)
         self._peg_start_height = torch.zeros(self.num_envs, device=self.device)
+        self._peg_mass = self.peg.mass.to(self.device)
+
+    def _latch_forces(self):
+        measures = self.insertion.measures(self.peg_end_frames())
+        seated = (is_inserted(measures, self.insertion.peg_radius) & is_aligned(measures))[:, 0]
+        into_hole = -self.insertion.hole_bottom[:, 0, :3, 2]
+        return [(self.peg, latch_force(seated, into_hole, self.peg.linear_velocity, self._peg_mass))]
 
     def peg_end_frames(self) -> torch.Tensor:
         """World poses (n, 1, 2, 4, 4) of the peg's insertable ends (the second repeats the first if only one):

@@ -18,6 +18,7 @@ from mani_skill_space.envs.insertion import (
     insertion_terms,
     is_aligned,
     is_inserted,
+    latch_force,
     lying_peg_orientation,
     peg_placement,
 )
@@ -96,6 +97,11 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     - the panel's seat (its plate's underside centre) is within 1 cm and 5 deg of its target, on the pegs'
       tops (either way round: the panel is symmetric under a half turn)
     - the panel is released
+
+    **Latches:** each socket holds a peg inserted in it (as Peg-in-Hole's hole does) and the pegs' tops hold a
+    seated panel: the part is pulled into its seat as hard as 1 g would, its motion damped
+    (`envs.insertion.latch_force`), so that in orbit released parts stay where they were put. Nothing that is
+    not inserted (or seated) is captured.
 
     **Reward:** staged, so that progress is monotone: 169 per filled socket (`pegs_inserted`), plus
     Peg-in-Hole's dense terms (reach 1, grasp 4, lift 8, axis 8, twist 4, entrance 16, bottom 128, each below
@@ -181,6 +187,22 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         super()._after_reconfigure(options)
         self._peg_start_height = torch.zeros((self.num_envs, SOCKET_COUNT), device=self.device)
         self._panel_start_height = torch.zeros(self.num_envs, device=self.device)
+        self._peg_masses = [peg.mass.to(self.device) for peg in self.pegs]
+        self._panel_mass = self.panel.mass.to(self.device)
+
+    def _latch_forces(self):
+        """Each socket latches a peg inserted in it, and the pegs' tops latch a seated panel (see the card)."""
+        measures = self.insertion.all_pair_measures(self.peg_end_frames())
+        in_socket = is_inserted(measures, self.insertion.peg_radius[:, :, None]) & is_aligned(measures) & self._fits
+        into_sockets = -self.insertion.hole_bottom[:, :, :3, 2]
+        forces = []
+        for i, peg in enumerate(self.pegs):
+            socket = in_socket[:, i].int().argmax(dim=1)
+            into = into_sockets[torch.arange(self.num_envs, device=self.device), socket]
+            forces.append((peg, latch_force(in_socket[:, i].any(dim=1), into, peg.linear_velocity, self._peg_masses[i])))
+        _, _, seated = self._seat_error()
+        forces.append((self.panel, latch_force(seated, -self.panel_target[:, :3, 2], self.panel.linear_velocity, self._panel_mass)))
+        return forces
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
@@ -217,6 +239,11 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         pose = self.panel.pose
         return pose_matrix(pose.p, pose.q) @ self._seat_in_panel
 
+    def _seat_error(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The panel seat's distance and angle from its target, and whether it is seated (within tolerance)."""
+        distance, angle = pose_error(self.panel_seat(), self.panel_target, half_turn_symmetric=True)
+        return distance, angle, (distance <= SEAT_DISTANCE_TOLERANCE) & (angle <= SEAT_ANGLE_TOLERANCE)
+
     def panel_handle(self) -> torch.Tensor:
         pose = self.panel.pose
         return pose_matrix(pose.p, pose.q) @ self._handle_in_panel
@@ -227,8 +254,7 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         socket_filled = in_socket.any(dim=1)
         sockets_filled = socket_filled.sum(dim=1)
         all_filled = sockets_filled == SOCKET_COUNT
-        seat_distance, seat_angle = pose_error(self.panel_seat(), self.panel_target, half_turn_symmetric=True)
-        panel_seated = (seat_distance <= SEAT_DISTANCE_TOLERANCE) & (seat_angle <= SEAT_ANGLE_TOLERANCE)
+        seat_distance, seat_angle, panel_seated = self._seat_error()
         panel_grasped = self.is_grasping(self.panel)
         panel_lift = self.panel_seat()[:, 2, 3] - self._panel_start_height
         panel_lifted = panel_lift >= PANEL_LIFT_BAND[0]
