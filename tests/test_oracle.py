@@ -37,7 +37,7 @@ def test_unknown_env_has_no_oracle():
 
 @pytest.mark.parametrize(
     "domain, asset_source, seed",
-    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 1), ("mars", "procedural", 100)],
+    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 2), ("mars", "procedural", 101)],
 )
 def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
     env = gym.make("PegInHoleAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")

@@ -123,6 +123,17 @@ class Oracle(Policy):
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
     @contextmanager
+    def obstacles_only(self, keep: Callable[[np.ndarray], np.ndarray]):
+        """Plan, inside the block, with only the obstacle points that ``keep`` returns of all of them (e.g. all
+        but a keep-out where the fingers must go)."""
+        everything = self.solver.all_collision_pts
+        self.solver.planner.update_point_cloud(keep(everything))
+        try:
+            yield
+        finally:
+            self.solver.planner.update_point_cloud(everything)
+
+    @contextmanager
     def _speed(self, scale: float):
         planner = self.solver.planner
         velocity, acceleration = planner.joint_vel_limits, planner.joint_acc_limits
@@ -134,10 +145,24 @@ class Oracle(Policy):
 
     def _joint_path(self, pose: sapien.Pose, what: str) -> np.ndarray:
         start = self.arm_qpos()
-        for goal in self.ik_solutions(pose):
+        goal = self._free_joint_goal(start, pose)
+        if goal is None:
+            raise PlanningFailed(f"no motion to the {what} pose")
+        return self._timed_path(start, goal)
+
+    def _free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """The IK solution for ``pose`` nearest ``start`` that a straight joint move from ``start`` reaches
+        without collision, if any."""
+        for goal in self.ik_solutions(pose, near=start):
             if self.path_is_free(start, goal):
-                return self._timed_path(start, goal)
-        raise PlanningFailed(f"no motion to the {what} pose")
+                return goal
+        return None
+
+    def motion_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its joint move), or
+        None if it would fail: for checking a whole plan before moving."""
+        positions = self._screw_path(start, pose)
+        return positions[-1] if positions is not None else self._free_joint_goal(start, pose)
 
     def joint_move(self, goal: np.ndarray, what: str) -> Iterator[np.ndarray]:
         """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised."""
@@ -152,12 +177,13 @@ class Oracle(Policy):
         _, positions, _, _, _ = self.solver.planner.TOPP(np.stack([start, goal]), step=self.env.control_timestep)
         return np.concatenate([positions, goal[None]])
 
-    def ik_solutions(self, pose: sapien.Pose) -> list[np.ndarray]:
-        """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to the current pose first."""
+    def ik_solutions(self, pose: sapien.Pose, near: Optional[np.ndarray] = None) -> list[np.ndarray]:
+        """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to ``near`` (the current
+        arm joints by default) first."""
         planner = self.solver.planner
         target = self.solver.base_pose.inv() * pose
         goal = np.concatenate([target.p, target.q])
-        start = self.arm_qpos()
+        start = self.arm_qpos() if near is None else np.asarray(near)
         dof = len(start)
         solutions = []
         for seed in [start, *_ik_starts(planner, dof)]:
@@ -319,20 +345,23 @@ def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:
     return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(count, dof))
 
 
-def surface_points(asset, pose: np.ndarray = np.eye(4)) -> np.ndarray:
-    """Obstacle points on an asset's collision parts, placed at ``pose`` (world frame)."""
-    points = _surface_points(asset, np.random.default_rng(0))
+def surface_points(asset, pose: np.ndarray = np.eye(4), margin: float = 0.0, spacing: float = POINT_SPACING) -> np.ndarray:
+    """Obstacle points on an asset's collision parts, about ``spacing`` apart, placed at ``pose`` (world frame);
+    with a ``margin``, the points stand that far out from the surface (the planner then keeps the arm about that
+    far from it, given points no farther apart than the margin)."""
+    points = _surface_points(asset, np.random.default_rng(0), margin, spacing)
     return points @ pose[:3, :3].T + pose[:3, 3]
 
 
-def _surface_points(asset, rng: np.random.Generator) -> np.ndarray:
-    """Points on the collision parts of a static asset, as the planner's obstacle point cloud (world frame)."""
+def _surface_points(asset, rng: np.random.Generator, margin: float = 0.0, spacing: float = POINT_SPACING) -> np.ndarray:
+    """Points on (or ``margin`` out from) the collision parts of an asset, in the asset's frame."""
     import trimesh
 
     samples = []
     for part in asset.collision_parts:
-        count = max(SURFACE_POINTS_PER_PART, int(part.mesh.area / POINT_SPACING**2))
-        samples.append(trimesh.sample.sample_surface(part.mesh, count, seed=rng)[0])
+        count = max(SURFACE_POINTS_PER_PART, int(part.mesh.area / spacing**2))
+        points, faces = trimesh.sample.sample_surface(part.mesh, count, seed=rng)
+        samples.append(points + margin * part.mesh.face_normals[faces])
     return np.concatenate(samples)
 
 
@@ -342,6 +371,34 @@ def _ground_points() -> np.ndarray:
     x, y = np.meshgrid(axis, axis)
     keep = np.hypot(x, y) <= GROUND_REACH
     return np.stack([x[keep], y[keep], np.full(keep.sum(), -GROUND_MARGIN)], axis=1)
+
+
+def open_finger_corners(env) -> np.ndarray:
+    """Corners (k, 3) of the open fingers' collision boxes in the TCP frame (the gripper as it is at reset: open)."""
+    import itertools
+
+    to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
+    corners = []
+    for link in env.agent.robot.links:
+        if "finger" not in link.name:
+            continue
+        entity = link._objs[0].entity
+        for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
+            box = np.array(list(itertools.product(*[(-h, h) for h in shape.half_size])))
+            frame = to_tcp @ (entity.pose * shape.get_local_pose()).to_transformation_matrix()
+            corners.append(box @ frame[:3, :3].T + frame[:3, 3])
+    return np.concatenate(corners)
+
+
+def lowest_point(actor) -> float:
+    """World height of the lowest vertex of an actor's (first env's) convex collision shapes."""
+    entity = actor._objs[0]
+    lowest = np.inf
+    for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
+        frame = (entity.pose * shape.get_local_pose()).to_transformation_matrix()
+        vertices = shape.get_vertices() * shape.get_scale()
+        lowest = min(lowest, float((vertices @ frame[:3, :3].T + frame[:3, 3])[:, 2].min()))
+    return lowest
 
 
 def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose:

@@ -1,11 +1,14 @@
 """Peg insertion as a component the Peg-in-Hole and Solar Panel oracles share.
 
-Before touching the peg it plans the insertion: the hand will take the lying peg from above, tilted toward the
-peg's tip, which fixes how it will hold the peg over the hole for each twist the profile's symmetry allows;
-the first twist (the hand pointing down and away from the arm first) for which the arm can line the peg up
-above the entrance and push it straight to the bottom wins. Then: grasp, lift, line the tip up above
-the entrance, re-measure the peg in the hand and correct, and servo the tip down the hole's axis,
-re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that).
+Before touching the peg it plans the whole insertion: the hand will take the lying peg from above, tilted toward
+the peg's tip (and, failing that, rolled about the peg's axis, or with the wrist turned half a turn), which fixes
+how it will hold the peg over the hole for each twist the profile's symmetry allows; the first grasp and twist
+(the hand pointing down and away from the arm first) for which the arm can reach the pre-grasp and grasp poses,
+lift the peg, swing it over the entrance and push it straight to the bottom wins. Then: grasp, lift, line the
+tip up above the entrance, re-measure the peg in the hand and correct, and servo the tip down the hole's axis,
+re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that);
+a push that jams is backed off and tried again. The planner sees the hole's surroundings whole, except near
+the hole's axis while the peg goes in (``outside_keepout``), where the fingers holding the peg must pass.
 
 The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_space.envs.insertion``).
 """
@@ -18,19 +21,27 @@ from typing import Any, Callable, Iterator, Optional
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off, lowest_point, open_finger_corners
 
 PRE_GRASP_DISTANCE = 0.08
 PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
 FINGER_MARGIN = 0.006
+FINGER_PRESS_DEPTH = 0.004
+"""The hand aims its open fingers at most this far (m) below the surface the peg lies on, so that they press on
+it lightly: aimed at a flat peg's axis, a tilted or rolled hand would drive a finger a centimetre into the
+ground and be thrown off."""
 HEAD_OVERHANG = 0.005
 """The grasp point may be this close to the peg's head: the pads may overhang its end."""
 GRASP_TILTS = np.radians([45.0, 30.0, 60.0])
 """The hand takes the lying peg tilted toward the peg's tip by one of these angles (the first that works).
 Turned tip-down over the hole, the peg then hangs from a hand pointing below level, its body rising away from
 the module's top: a level hand would hit the block beside a short peg."""
+GRASP_ROLLS = np.radians([0.0, 25.0, -25.0])
+"""...and rolled about the peg's axis by one of these (from straight above first)."""
+HALF_TURN_ABOUT_APPROACH = np.array([0.0, 0.0, 0.0, 1.0])
+"""wxyz: the hand turned half a turn about its approach axis grips the same way with the wrist turned."""
 ROUND_PEG_TWISTS = 8
 """Candidate twists tried for a peg that fits the hole at any twist."""
 APPROACH_GAP = 0.1
@@ -88,7 +99,7 @@ class InsertionSettings:
     """Height (m) of the TCP after lifting the peg, before swinging it over the hole."""
     relax_steps: int = 0
     """Steps spent easing off the push at the end of the insertion (for a peg that will be let go)."""
-    insert_attempts: int = 1
+    insert_attempts: int = 3
     """Pushes tried (the first that gets the peg in ends it)."""
     insert_step: float = 0.0025
     """How far (m) the tip goes down the hole's axis per control step while inserting."""
@@ -102,6 +113,7 @@ class PegInserter:
 
     def __init__(self, oracle: Oracle, settings: InsertionSettings = InsertionSettings()):
         self.oracle, self.settings = oracle, settings
+        self.finger_corners = open_finger_corners(oracle.env)
 
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
         """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
@@ -117,7 +129,8 @@ class PegInserter:
 
         for attempt in range(self.settings.insert_attempts):
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
-                yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
+                with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+                    yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
             yield from self._push_in(target, end, twist, line_up=attempt == 0)
             if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
                 break
@@ -125,9 +138,13 @@ class PegInserter:
             yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
 
     def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Iterator[np.ndarray]:
-        bottom, depth = target.bottom, target.depth
         if line_up:
             yield from self.oracle.joint_move(self._line_up(target, end, twist), "over the hole")
+        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+            yield from self._lower_in(target, end, twist)
+
+    def _lower_in(self, target: PegTarget, end: int, twist: float) -> Iterator[np.ndarray]:
+        bottom, depth = target.bottom, target.depth
         for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
             yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
         start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
@@ -142,46 +159,67 @@ class PegInserter:
 
     # ------------------------------------------------------------------ planning
     def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
+        """The first grasp (and twist over the hole) for which the whole insertion is feasible from where the arm
+        is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom."""
         bottom, depth = target.bottom, target.depth
         tip = target.end_frames()[end]
         outward = bottom[:3, 3] - self.oracle.solver.base_pose.p
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
-        for tilt in GRASP_TILTS:
-            grasp = self._grasp_pose(target, tip, tilt)
-            if not (self.oracle.ik_solutions(grasp) and self.oracle.ik_solutions(backed_off(grasp, PRE_GRASP_DISTANCE))):
+        start = self.oracle.arm_qpos()
+        for grasp in self._grasp_candidates(target, tip):
+            lifted = self._grasp_and_lift_end(start, grasp)
+            if lifted is None:
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
             hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             for twist in sorted(_twists(target.symmetry), key=score):
-                if self._insertion_arm(bottom, depth, twist, tip_in_hand) is not None:
+                if self._insertion_arm(target, twist, tip_in_hand, start=lifted) is not None:
                     return grasp, float(twist)
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+
+    def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose) -> Optional[np.ndarray]:
+        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail."""
+        arm = start
+        for pose in (backed_off(grasp, PRE_GRASP_DISTANCE), grasp, at_height(grasp, self.settings.lift_height)):
+            arm = self.oracle.motion_end(arm, pose)
+            if arm is None:
+                return None
+        return arm
 
     def _line_up(self, target: PegTarget, end: int, twist: float) -> np.ndarray:
         """An arm configuration for the planned twist, given how the hand really holds the peg now."""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
-        arm = self._insertion_arm(target.bottom, target.depth, twist, tip_in_hand, start=self.oracle.arm_qpos())
+        arm = self._insertion_arm(target, twist, tip_in_hand, start=self.oracle.arm_qpos())
         if arm is None:
             raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
         return arm
 
-    def _insertion_arm(self, bottom, depth, twist, tip_in_hand, start: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+    def _insertion_arm(self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
         """An arm configuration holding the tip over the hole on its axis (with ``tip_in_hand``) from which a
         straight push reaches the bottom, and (given ``start``) a straight joint move reaches it; None if there
         is none."""
+        bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
         pressed = hand(-PRESS_DEPTH)
-        for arm in self.oracle.ik_solutions(hand(depth + APPROACH_GAP)):
-            if (start is None or self.oracle.path_is_free(start, arm)) and self.oracle.screw_is_feasible(arm, pressed):
-                return arm
-        return None
+        arms = [arm for arm in self.oracle.ik_solutions(hand(depth + APPROACH_GAP)) if start is None or self.oracle.path_is_free(start, arm)]
+        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+            return next((arm for arm in arms if self.oracle.screw_is_feasible(arm, pressed)), None)
 
-    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float) -> sapien.Pose:
-        """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip, with the finger pads
-        far enough from the tip to stay out of the hole."""
+    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray) -> Iterator[sapien.Pose]:
+        """Hand poses taking the lying peg, most natural first: every grasp tilt, then the hand rolled about the
+        peg's axis, each also turned a half turn about its approach (the same grip, another wrist angle)."""
+        for roll in GRASP_ROLLS:
+            for tilt in GRASP_TILTS:
+                grasp = self._grasp_pose(target, tip, tilt, roll)
+                yield grasp
+                yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
+
+    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float, roll: float = 0.0) -> sapien.Pose:
+        """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip and rolled by ``roll``
+        about its axis, with the finger pads far enough from the tip to stay out of the hole."""
         axis = tip[:3, 2]
         height, depth = target.height, target.depth
         reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
@@ -189,8 +227,13 @@ class PegInserter:
         closing /= np.linalg.norm(closing)
         upward = np.cross(closing, axis)
         upward *= np.sign(upward[2])
+        upward, closing = np.cos(roll) * upward + np.sin(roll) * closing, np.cos(roll) * closing - np.sin(roll) * upward
         approach = -np.sin(tilt) * axis - np.cos(tilt) * upward
-        return self.oracle.env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
+        grasp = self.oracle.env.agent.build_grasp_pose(approach, closing, tip[:3, 3] + reach * axis)
+        # a flat peg's axis lies lower than the open fingers can reach (the finger pads still span its widest part)
+        fingers_low = (self.finger_corners @ grasp.to_transformation_matrix()[:3, :3].T)[:, 2].min()
+        rise = max(0.0, lowest_point(target.peg) - FINGER_PRESS_DEPTH - (grasp.p[2] + fingers_low))
+        return sapien.Pose(grasp.p + [0.0, 0.0, rise], grasp.q)
 
     def _end_toward_arm(self, target: PegTarget) -> int:
         """Of the insertable ends, the one nearest the arm: the hand, tilted toward the tip, then comes from the

@@ -15,7 +15,7 @@ import numpy as np
 import sapien
 
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
-from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, outside_keepout
+from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget
 
 INSERTION_ORDER = (2, 3, 0, 1)
 """Sockets in the order they are filled: the farther (short) ones first."""
@@ -50,7 +50,7 @@ class SolarPanelOracle(Oracle):
         inserter = PegInserter(self, PEG_INSERTION)
         for socket in INSERTION_ORDER:
             target = PegTarget.of(env, env.pegs[socket], socket)
-            self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket, target=target))
+            self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket))
             yield from inserter.insert(target)
             yield from self.open_gently(8)
             yield from self.screw_to(raised(self.tcp_pose(), RETREAT_DISTANCE), "retreat")
@@ -62,14 +62,12 @@ class SolarPanelOracle(Oracle):
         yield from self.place_panel(env)
         yield from self.wait_for_success(20)
 
-    def _obstacles(self, env, exclude_peg: int = -1, target: PegTarget = None) -> np.ndarray:
-        """The socket posts (less the keep-out around the target's axis), the other pegs where they are now and
-        the panel where it is now, as the planner's obstacle points."""
+    def _obstacles(self, env, exclude_peg: int = -1) -> np.ndarray:
+        """The socket posts, the other pegs where they are now and the panel where it is now, as the planner's
+        obstacle points (the insertion leaves out the keep-out around its socket's axis while it lowers a peg in)."""
         base = np.eye(4)
         base[:3, 3] = env.socket_base.pose.p[0].cpu().numpy()
         points = [surface_points(env.socket_assets[0], base)]
-        if target is not None:
-            points[0] = outside_keepout(points[0], target)
         for i, peg in enumerate(env.pegs):
             if i != exclude_peg:
                 points.append(surface_points(env.peg_assets[0][i], peg.pose.sp.to_transformation_matrix()))
