@@ -421,11 +421,22 @@ class RestingPlacement:
         rests = [resting_orientations(a.collision_vertices, exclude_axis=exclude_axis) for a in assets]
         self.counts = torch.tensor([len(r) for r in rests], device=device)
         self.quaternions = padded_points(rests, device)
+        self.allowed = torch.arange(self.quaternions.shape[1], device=device)[None, :] < self.counts[:, None]
+        """(n, faces): the faces ``face_down`` picks from (all stable faces unless ``allow_only`` narrowed them)."""
+
+    def allow_only(self, faces: torch.Tensor) -> None:
+        """Let ``face_down`` pick only among ``faces`` (n, faces) of each env's stable faces; every env must keep one."""
+        allowed = self.allowed & faces
+        if not bool(allowed.any(dim=1).all()):
+            raise ValueError("every env needs at least one allowed resting face")
+        self.allowed = allowed
 
     def face_down(self, env_idx: torch.Tensor, uniform) -> torch.Tensor:
-        """wxyz orientations (b, 4) putting a stable face down, picked by ``uniform`` draws in [0, 1)."""
-        counts = self.counts[env_idx]
-        face = (torch.as_tensor(uniform, dtype=torch.float32, device=counts.device) * counts).long().clamp(max=counts - 1)
+        """wxyz orientations (b, 4) putting a stable (allowed) face down, picked by ``uniform`` draws in [0, 1)."""
+        allowed = self.allowed[env_idx]
+        counts = allowed.sum(dim=1)
+        pick = (torch.as_tensor(uniform, dtype=torch.float32, device=counts.device) * counts).long().clamp(max=counts - 1)
+        face = ((allowed.cumsum(dim=1) - 1 == pick[:, None]) & allowed).int().argmax(dim=1)
         return self.quaternions[env_idx, face]
 
     def height_on_ground(self, env_idx: torch.Tensor, quaternion: torch.Tensor, clearance: float) -> torch.Tensor:

@@ -19,8 +19,10 @@ from mani_skill_space.envs.insertion import (
     latch_force,
     lying_peg_orientation,
     peg_placement,
+    reachable_faces,
 )
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.procgen.peg_hole import check_clearance, make_peg_hole_pair
 from mani_skill_space.rewards import RewardTable
@@ -32,7 +34,31 @@ PEG_DISTANCE = (0.24, 0.28)
 """The peg lies this far in front of the module (toward the arm), as in the reference."""
 PEG_LATERAL = 0.05
 
+MAX_PAIR_DRAWS = 50
+"""Draws of a procedural pair per asset seed before giving up on finding one the arm can insert (about one in
+six draws is rejected: see ``reachable_peg_hole_pair``)."""
+
 REWARD_TABLE = RewardTable((*insertion_terms(), *PENALTY_TERMS))
+
+
+def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray) -> tuple[Asset, Asset]:
+    """The procedural pair of ``seed``, drawn again (from seeds derived from it, deterministically) while no
+    resting face of its peg leaves it reachable for insertion (``envs.insertion.reachable_faces``) by an arm at
+    ``arm_base``. The hole's ``info["feasibility"]`` records the check: how many draws it took and how many faces
+    pass (the episode's peg lies on one of those)."""
+    for draw in range(MAX_PAIR_DRAWS):
+        draw_seed = seed if draw == 0 else int(np.random.SeedSequence([seed, draw]).generate_state(1)[0] & 0x7FFFFFFF)
+        peg, hole = make_peg_hole_pair(draw_seed, clearance)
+        module = np.eye(4)
+        module[:3, 3] = MODULE_POSITION
+        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)[None]  # noqa: E731
+        faces = reachable_faces(
+            peg_placement([peg], "cpu"), as_tensor(peg.frames["end_0"]), as_tensor(module @ hole.frames["bottom"]), torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)[0]
+        )
+        if bool(faces.any()):
+            hole.info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": int(faces.sum()), "resting_faces": int(faces.shape[1])}
+            return peg, hole
+    raise RuntimeError(f"no procedural peg/hole pair the arm can insert in {MAX_PAIR_DRAWS} draws from seed {seed}")
 
 
 @register_env("PegInHoleAssembly-v1", max_episode_steps=200)
@@ -51,7 +77,9 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
       polygon, squashed), size and taper, and a module with the matching hole cut at a random offset, tilt
       (up to 20 deg) and depth, `clearance` (default 1 mm) wider than the peg
     - the peg lies on a random stable side 0.24-0.28 m in front of the module, y within +-5 cm, its tip
-      toward the arm within +-11 deg
+      toward the arm within +-11 deg; for procedural pairs, only on a side from which the arm can take it and
+      hold it over the hole (`envs.insertion.reachable_faces`; a pair with no such side is drawn again, and
+      the module asset's `info["feasibility"]` records the check)
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
     **Success Conditions:**
@@ -94,7 +122,8 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
         self._load_domain_scene()
         seeds = self._asset_seeds()
         if self.asset_source == "procedural":
-            pairs = [make_peg_hole_pair(seed, self.clearance) for seed in seeds]
+            arm_base = self.mount.frames["arm_mount"][:3, 3]
+            pairs = [reachable_peg_hole_pair(seed, self.clearance, arm_base) for seed in seeds]
             pegs, holes = [p for p, _ in pairs], [h for _, h in pairs]
         else:
             lengths = np.where(np.asarray(seeds) % 2 == 0, "short", "long")
@@ -115,6 +144,10 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
             device=self.device,
         )
         self._placement = peg_placement(pegs, self.device)
+        if self.asset_source == "procedural":
+            arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=self.device)
+            tips = self.insertion.peg_ends[:, 0, 0]
+            self._placement.allow_only(reachable_faces(self._placement, tips, self.insertion.hole_bottom[:, 0], self.insertion.symmetry_order[:, 0], arm_base))
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):

@@ -15,8 +15,9 @@ The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_s
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Optional
+from typing import Any, Callable, Generator, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -50,6 +51,9 @@ PRE_INSERT_GAP = 0.03
 """How far above the entrance the tip is lined up before going in."""
 PRESS_DEPTH = 0.003
 """The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
+ENOUGH_DEPTH_LEFT = 0.05
+"""A push whose tip stops this fraction of the depth above the bottom still inserts the peg (the task asks for
+90% of the depth)."""
 SETTLE_STEPS = 4
 RETRY_BELOW_FRACTION = 0.9
 RELAXED_HEIGHT = 0.0005
@@ -111,9 +115,18 @@ class PegInserter:
     """Grasps a lying peg, lines it up over its hole and pushes it to the bottom, with the motions of ``oracle``
     (whose solver must be ready, with the hole's surroundings as obstacles)."""
 
-    def __init__(self, oracle: Oracle, settings: InsertionSettings = InsertionSettings()):
+    def __init__(self, oracle: Oracle, settings: InsertionSettings = InsertionSettings(), reach_obstacles: Optional[np.ndarray] = None):
+        """``reach_obstacles``: more obstacle points (world frame) for the motions that take the peg and carry it
+        over the hole (not for the push into it), e.g. the hole's surroundings with a margin."""
         self.oracle, self.settings = oracle, settings
+        self.reach_obstacles = reach_obstacles
         self.finger_corners = open_finger_corners(oracle.env)
+
+    def _reaching(self):
+        """Plan with the ``reach_obstacles`` too, inside the block."""
+        if self.reach_obstacles is None:
+            return nullcontext()
+        return self.oracle.obstacles_only(lambda points: np.concatenate([points, self.reach_obstacles]))
 
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
         """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
@@ -121,27 +134,32 @@ class PegInserter:
         grasp, twist = self._plan_grasp(target, end)
         bottom, depth = target.bottom, target.depth
 
-        yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
-        yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
-        yield from self.oracle.set_gripper(GRIPPER_CLOSED)
-        yield from self.oracle.wait_for_grasp(target.peg, "the peg")
-        yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift")
+        with self._reaching():
+            yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
+            yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
+            yield from self.oracle.set_gripper(GRIPPER_CLOSED)
+            yield from self.oracle.wait_for_grasp(target.peg, "the peg")
+            yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift")
 
         for attempt in range(self.settings.insert_attempts):
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
                 with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
                     yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
-            yield from self._push_in(target, end, twist, line_up=attempt == 0)
+            twist = yield from self._push_in(target, end, twist, line_up=attempt == 0)
             if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
                 break
         if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
             yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
 
-    def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Iterator[np.ndarray]:
+    def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Generator[np.ndarray, None, float]:
+        """Line the peg up over the hole (if ``line_up``) and push it in; returns the twist it went in with."""
         if line_up:
-            yield from self.oracle.joint_move(self._line_up(target, end, twist), "over the hole")
+            with self._reaching():
+                arm, twist = self._line_up(target, end, twist)
+                yield from self.oracle.joint_move(arm, "over the hole")
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             yield from self._lower_in(target, end, twist)
+        return twist
 
     def _lower_in(self, target: PegTarget, end: int, twist: float) -> Iterator[np.ndarray]:
         bottom, depth = target.bottom, target.depth
@@ -168,7 +186,8 @@ class PegInserter:
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         for grasp in self._grasp_candidates(target, tip):
-            lifted = self._grasp_and_lift_end(start, grasp)
+            with self._reaching():
+                lifted = self._grasp_and_lift_end(start, grasp)
             if lifted is None:
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
@@ -176,7 +195,9 @@ class PegInserter:
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             for twist in sorted(_twists(target.symmetry), key=score):
-                if self._insertion_arm(target, twist, tip_in_hand, start=lifted) is not None:
+                with self._reaching():
+                    found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
+                if found is not None:
                     return grasp, float(twist)
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
@@ -189,21 +210,27 @@ class PegInserter:
                 return None
         return arm
 
-    def _line_up(self, target: PegTarget, end: int, twist: float) -> np.ndarray:
-        """An arm configuration for the planned twist, given how the hand really holds the peg now."""
+    def _line_up(self, target: PegTarget, end: int, twist: float) -> tuple[np.ndarray, float]:
+        """An arm configuration over the hole, and its twist, given how the hand really holds the peg now (not
+        quite as planned: the fingers close on it where they meet it): the planned twist if it still works,
+        else the nearest other one the profile's symmetry allows."""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
-        arm = self._insertion_arm(target, twist, tip_in_hand, start=self.oracle.arm_qpos())
-        if arm is None:
-            raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
-        return arm
+        twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
+        # a push that stops just short of the bottom still inserts the peg: the last resort
+        for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
+            for candidate in twists:
+                arm = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to)
+                if arm is not None:
+                    return arm, float(candidate)
+        raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
 
-    def _insertion_arm(self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+    def _insertion_arm(self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH) -> Optional[np.ndarray]:
         """An arm configuration holding the tip over the hole on its axis (with ``tip_in_hand``) from which a
-        straight push reaches the bottom, and (given ``start``) a straight joint move reaches it; None if there
+        straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it; None if there
         is none."""
         bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
-        pressed = hand(-PRESS_DEPTH)
+        pressed = hand(push_to)
         arms = [arm for arm in self.oracle.ik_solutions(hand(depth + APPROACH_GAP)) if start is None or self.oracle.path_is_free(start, arm)]
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             return next((arm for arm in arms if self.oracle.screw_is_feasible(arm, pressed)), None)
