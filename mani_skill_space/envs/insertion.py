@@ -217,6 +217,19 @@ def reachable_faces(placement: RestingPlacement, tip_frames: torch.Tensor, hole_
     return usable.any(dim=-1) & real_face
 
 
+def reachable_faces_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray) -> torch.Tensor:
+    """``reachable_faces`` (faces,) of one peg asset for its hole's ``hole_bottom`` (world, 4 x 4), on the CPU."""
+    as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)  # noqa: E731
+    return reachable_faces(
+        peg_placement([peg], "cpu"), as_tensor(peg.frames["end_0"])[None], as_tensor(hole_bottom)[None], torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)
+    )[0]
+
+
+def redrawn_seed(seed: int, draw: int) -> int:
+    """The asset seed of the ``draw``-th redraw for ``seed`` (the seed itself first), deterministic."""
+    return int(seed) if draw == 0 else int(np.random.SeedSequence([int(seed), draw]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
 def _top_grasp(axis: torch.Tensor, tilt: float) -> torch.Tensor:
     """Hand rotations (..., 3, 3: x, closing, approach columns, ManiSkill's grasp convention) taking a lying peg
     with ``axis`` (..., 3) from above, tilted by ``tilt`` toward the end the axis points away from."""

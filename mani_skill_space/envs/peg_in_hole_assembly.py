@@ -20,6 +20,8 @@ from mani_skill_space.envs.insertion import (
     lying_peg_orientation,
     peg_placement,
     reachable_faces,
+    reachable_faces_of,
+    redrawn_seed,
 )
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.asset import Asset
@@ -46,17 +48,13 @@ def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray) -
     resting face of its peg leaves it reachable for insertion (``envs.insertion.reachable_faces``) by an arm at
     ``arm_base``. The hole's ``info["feasibility"]`` records the check: how many draws it took and how many faces
     pass (the episode's peg lies on one of those)."""
+    module = np.eye(4)
+    module[:3, 3] = MODULE_POSITION
     for draw in range(MAX_PAIR_DRAWS):
-        draw_seed = seed if draw == 0 else int(np.random.SeedSequence([seed, draw]).generate_state(1)[0] & 0x7FFFFFFF)
-        peg, hole = make_peg_hole_pair(draw_seed, clearance)
-        module = np.eye(4)
-        module[:3, 3] = MODULE_POSITION
-        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)[None]  # noqa: E731
-        faces = reachable_faces(
-            peg_placement([peg], "cpu"), as_tensor(peg.frames["end_0"]), as_tensor(module @ hole.frames["bottom"]), torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)[0]
-        )
+        peg, hole = make_peg_hole_pair(redrawn_seed(seed, draw), clearance)
+        faces = reachable_faces_of(peg, module @ hole.frames["bottom"], arm_base)
         if bool(faces.any()):
-            hole.info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": int(faces.sum()), "resting_faces": int(faces.shape[1])}
+            hole.info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": int(faces.sum()), "resting_faces": len(faces)}
             return peg, hole
     raise RuntimeError(f"no procedural peg/hole pair the arm can insert in {MAX_PAIR_DRAWS} draws from seed {seed}")
 

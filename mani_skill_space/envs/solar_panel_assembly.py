@@ -21,6 +21,9 @@ from mani_skill_space.envs.insertion import (
     latch_force,
     lying_peg_orientation,
     peg_placement,
+    reachable_faces,
+    reachable_faces_of,
+    redrawn_seed,
 )
 from mani_skill_space.geometry import pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
@@ -35,6 +38,7 @@ from mani_skill_space.procgen.solar_panel import (
     make_socket_base,
     make_solar_layout,
     make_solar_pegs,
+    socket_frames,
 )
 from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
 
@@ -70,6 +74,28 @@ REWARD_TABLE = RewardTable(
 )
 
 
+MAX_SET_DRAWS = 50
+
+
+def reachable_solar_set(seed: int, clearance: float, arm_base: np.ndarray) -> tuple:
+    """The procedural layout and pegs of ``seed``, drawn again (deterministically) while some peg has no resting
+    face from which the arm can hold it over its socket (``envs.insertion.reachable_faces``). The layout's
+    ``feasibility`` dict (on the first peg's ``info``) records how many draws it took and each socket's count of
+    reachable faces."""
+    origin = np.eye(4)
+    origin[:2, 3] = PANEL_TARGET_XY
+    for draw in range(MAX_SET_DRAWS):
+        draw_seed = redrawn_seed(seed, draw)
+        layout = make_solar_layout(draw_seed, clearance)
+        pegs = make_solar_pegs(layout, draw_seed)
+        frames = socket_frames(layout)
+        faces = [reachable_faces_of(peg, origin @ frames[f"bottom_{i}"], arm_base) for i, peg in enumerate(pegs)]
+        if all(bool(f.any()) for f in faces):
+            pegs[0].info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": [int(f.sum()) for f in faces]}
+            return layout, pegs
+    raise RuntimeError(f"no procedural solar set the arm can assemble in {MAX_SET_DRAWS} draws from seed {seed}")
+
+
 @register_env("SolarPanelAssembly-v1", max_episode_steps=1000)
 class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     """
@@ -87,7 +113,9 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
       radius 10-16 mm, squashed by 0.6-1) for all four pegs, short pegs 0.09-0.12 m (long ones 0.1 m
       longer), sockets 20-30 mm deep with `clearance` (default 1 mm), and the panel's size (0.9-1.1x per side,
       the sockets and receptacles moving with it)
-    - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg;
+    - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg
+      (for procedural sets, only on a side from which the arm can hold it over its socket:
+      `envs.insertion.reachable_faces`; a set with a peg that has none is drawn again);
       the panel within 1 cm / 2 cm / 5 deg of its place on the deck
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
@@ -142,8 +170,9 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         self._load_domain_scene()
         seeds = self._asset_seeds()
         if self.asset_source == "procedural":
-            layouts = [make_solar_layout(seed, self.clearance) for seed in seeds]
-            pegs = [make_solar_pegs(layout, seed) for layout, seed in zip(layouts, seeds)]
+            arm_base = self.mount.frames["arm_mount"][:3, 3]
+            sets = [reachable_solar_set(seed, self.clearance, arm_base) for seed in seeds]
+            layouts, pegs = [layout for layout, _ in sets], [set_pegs for _, set_pegs in sets]
         else:
             long, short = load_dataset_object("profile_peg_long"), load_dataset_object("profile_peg_short")
             layouts = [_DATASET_LAYOUT] * self.num_envs
@@ -179,6 +208,11 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         target[:3, 3] = (*PANEL_TARGET_XY, SEAT_HEIGHT)
         self.panel_target = as_tensor([target] * self.num_envs)
         self._peg_placements = [peg_placement([p[i] for p in pegs], device) for i in sockets]
+        if self.asset_source == "procedural":
+            arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=device)
+            for i, placement in enumerate(self._peg_placements):
+                insertion = self.insertion
+                placement.allow_only(reachable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
         self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
         # the sockets each peg may fill: those of its length
         self._fits = self._socket_class[:, None] == self._socket_class[None, :]

@@ -165,18 +165,25 @@ def make_solar_pegs(layout: SolarLayout, seed: int) -> list[Asset]:
     return [make_peg(dataclasses.replace(layout.profile, height=length), name=f"solar_peg_{seed}_{i}") for i, length in enumerate(layout.peg_lengths)]
 
 
-def make_socket_base(layout: SolarLayout) -> Asset:
-    """The four socket posts (static), origin on the ground below the panel's target centre."""
-    collision, visual, frames = [], [], {}
+def socket_frames(layout: SolarLayout) -> dict[str, np.ndarray]:
+    """Each socket's ``bottom_i`` and ``entrance_i`` frame (z up, out of the socket) in the base's frame."""
+    frames = {}
     for i, ((x, y), length) in enumerate(zip(layout.socket_xy, layout.peg_lengths)):
         bottom_z = SEAT_HEIGHT - length
-        top_z = bottom_z + layout.depth
+        frames[f"bottom_{i}"] = translation_frame((x, y, bottom_z))
+        frames[f"entrance_{i}"] = translation_frame((x, y, bottom_z + layout.depth))
+    return frames
+
+
+def make_socket_base(layout: SolarLayout) -> Asset:
+    """The four socket posts (static), origin on the ground below the panel's target centre."""
+    collision, visual, frames = [], [], socket_frames(layout)
+    for i, (x, y) in enumerate(layout.socket_xy):
+        bottom, top_z = frames[f"bottom_{i}"][:3, 3], frames[f"entrance_{i}"][2, 3]
         post = np.array([[x + sx * POST_HALF_WIDTH, y + sy * POST_HALF_WIDTH, z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, top_z)])
-        cavity = _bore_points(layout) + [x, y, bottom_z]
+        cavity = _bore_points(layout) + bottom
         collision += [CollisionPart(convex_mesh(p)) for p in subtract_convex(post, cavity)]
         visual.append(trimesh.boolean.difference([convex_mesh(post), convex_mesh(cavity)], engine="manifold"))
-        frames[f"bottom_{i}"] = translation_frame((x, y, bottom_z))
-        frames[f"entrance_{i}"] = translation_frame((x, y, top_z))
     return Asset(
         name="socket_base",
         visual_parts=tuple(VisualPart(m, MODULE_COLOR, roughness=0.6, metallic=0.4) for m in visual),

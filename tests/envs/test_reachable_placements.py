@@ -87,3 +87,18 @@ def test_every_procedural_pair_has_a_reachable_face_and_records_its_check():
         assert int(faces.sum()) == record["reachable_resting_faces"]
         if record["draws"] == 1:
             assert peg.name == make_peg_hole_pair(seed)[0].name  # a pair that passes is the seed's own
+
+
+def test_every_procedural_solar_set_has_a_reachable_face_for_each_peg():
+    from mani_skill_space.envs.solar_panel_assembly import PANEL_TARGET_XY, reachable_solar_set
+    from mani_skill_space.envs.insertion import reachable_faces_of
+    from mani_skill_space.procgen.solar_panel import socket_frames
+
+    origin = np.eye(4)
+    origin[:2, 3] = PANEL_TARGET_XY
+    for seed in range(10):
+        layout, pegs = reachable_solar_set(seed, 0.001, ARM_BASE.numpy())
+        record = pegs[0].info["feasibility"]
+        frames = socket_frames(layout)
+        counts = [int(reachable_faces_of(peg, origin @ frames[f"bottom_{i}"], ARM_BASE.numpy()).sum()) for i, peg in enumerate(pegs)]
+        assert counts == record["reachable_resting_faces"] and min(counts) >= 1
