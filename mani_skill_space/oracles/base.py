@@ -99,6 +99,7 @@ class Oracle(Policy):
         solver.add_collision_pts(points)
         solver.use_point_cloud = True
         self.solver = solver
+        self._obstacles_in_use = solver.all_collision_pts
         return solver
 
     def tcp_pose(self) -> sapien.Pose:
@@ -123,15 +124,18 @@ class Oracle(Policy):
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
     @contextmanager
-    def obstacles_only(self, keep: Callable[[np.ndarray], np.ndarray]):
-        """Plan, inside the block, with only the obstacle points that ``keep`` returns of all of them (e.g. all
-        but a keep-out where the fingers must go)."""
-        everything = self.solver.all_collision_pts
-        self.solver.planner.update_point_cloud(keep(everything))
+    def obstacles_only(self, choose: Callable[[np.ndarray], np.ndarray]):
+        """Plan, inside the block, with the obstacle points that ``choose`` makes of the solver's own (e.g. all but
+        a keep-out where the fingers must go, or more around something to keep clear of); blocks nest, and each
+        restores the points in use before it."""
+        previous = getattr(self, "_obstacles_in_use", self.solver.all_collision_pts)
+        self._obstacles_in_use = choose(self.solver.all_collision_pts)
+        self.solver.planner.update_point_cloud(self._obstacles_in_use)
         try:
             yield
         finally:
-            self.solver.planner.update_point_cloud(everything)
+            self._obstacles_in_use = previous
+            self.solver.planner.update_point_cloud(previous)
 
     @contextmanager
     def _speed(self, scale: float):

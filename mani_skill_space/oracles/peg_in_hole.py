@@ -12,9 +12,9 @@ from mani_skill_space.oracles.base import Oracle, surface_points
 from mani_skill_space.oracles.insertion import PegInserter, PegTarget
 
 MODULE_MARGIN = 0.01
-"""The planner keeps the arm this far (m) from the module: its Panda links are a little slimmer than the simulated
-ones (the wrist by about a centimetre), and the wrist reaches over the module's top to take a peg lying in
-front of it."""
+"""While taking the peg and carrying it over the hole, the planner keeps the arm this far (m) from the module:
+its Panda links are a little slimmer than the simulated ones (the wrist by about a centimetre), and the wrist
+reaches over the module's top to take a peg lying in front of it. (Pushing the peg in, the hand comes closer.)"""
 
 
 class PegInHoleOracle(Oracle):
@@ -22,6 +22,7 @@ class PegInHoleOracle(Oracle):
         target = PegTarget.of(env, env.peg, 0)
         module = np.eye(4)
         module[:3, 3] = env.hole_module.pose.p[0].cpu().numpy()
-        self.make_solver(env, obstacles=surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN))
-        yield from PegInserter(self).insert(target)
+        self.make_solver(env, obstacles=surface_points(env.hole_assets[0], module))
+        wide_module = surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN)
+        yield from PegInserter(self, reach_obstacles=wide_module).insert(target)
         yield from self.wait_for_success(20)
