@@ -28,6 +28,9 @@ PEG_LIFT_HEIGHT = 0.45
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
 STILL_IN_FRACTION = 0.8
 PANEL_PRE_GRASP = 0.1
+PANEL_LEVEL_ACROSS = 0.5
+"""The bar's across direction must be at least this level (horizontal length of the unit vector) to be taken
+from above."""
 PANEL_LIFT = 0.3
 """How far (m) the panel goes straight up off the deck before swinging round."""
 PLACE_GAP = 0.05
@@ -97,8 +100,12 @@ class SolarPanelOracle(Oracle):
     def _panel_grasp(self, env) -> sapien.Pose:
         """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches."""
         handle = env.panel_handle()[0].cpu().numpy().astype(np.float64)
+        across = handle[:3, 0] * [1.0, 1.0, 0.0]  # level, even if the panel was knocked askew
+        if np.linalg.norm(across) < PANEL_LEVEL_ACROSS:
+            raise PlanningFailed("the panel's bar stands on end: there is no grasp from above")
+        across /= np.linalg.norm(across)
         for sign in (1.0, -1.0):
-            pose = env.agent.build_grasp_pose(np.array([0.0, 0.0, -1.0]), sign * handle[:3, 0], handle[:3, 3])
+            pose = env.agent.build_grasp_pose(np.array([0.0, 0.0, -1.0]), sign * across, handle[:3, 3])
             if self.ik_solutions(pose) and self.ik_solutions(backed_off(pose, PANEL_PRE_GRASP)):
                 return pose
         raise PlanningFailed("the arm cannot reach down to the panel's bar")
