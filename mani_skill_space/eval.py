@@ -97,8 +97,6 @@ def run_chunk(chunk: Chunk) -> list[EpisodeResult]:
 def plan_chunks(suite: Suite, policies: tuple[str, ...], args: Args) -> list[Chunk]:
     chunks = []
     for configuration in suite.configurations:
-        if not configuration.available:
-            continue
         seeds = configuration.seeds[: args.episodes] if args.episodes else configuration.seeds
         for policy in policies:
             video_dir = str(args.output_dir / "videos" / _slug(configuration.name)) if args.video else None
@@ -155,11 +153,8 @@ def _report(suite: Suite, policies: tuple[str, ...], results: dict) -> dict:
     for configuration in suite.configurations:
         for policy in policies:
             row = {"configuration": configuration.name, "env_id": configuration.env_id, "kwargs": configuration.kwargs, "policy": policy}
-            if not configuration.available:
-                row["status"] = "not available: task not implemented yet"
-            else:
-                episodes = sorted(results[(configuration.name, policy)], key=lambda r: r.seed)
-                row.update(status="ok", summary=summarize(episodes), episodes=[e.to_dict() for e in episodes])
+            episodes = sorted(results[(configuration.name, policy)], key=lambda r: r.seed)
+            row.update(status="ok", summary=summarize(episodes), episodes=[e.to_dict() for e in episodes])
             rows.append(row)
     return {"suite": suite.name, "suite_file": str(suite.path), "policies": list(policies), "rows": rows}
 
@@ -172,9 +167,6 @@ def markdown_table(report: dict) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     for row in report["rows"]:
-        if row["status"] != "ok":
-            lines.append(f"| {row['configuration']} | {row['policy']} | - | {row['status']} | | | |")
-            continue
         s = row["summary"]
         lines.append(
             f"| {row['configuration']} | {row['policy']} | {s['episodes']} | {_rate(s['success_once'], s['success_once_ci95'])} "

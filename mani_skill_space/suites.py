@@ -10,8 +10,7 @@
     episodes = 5          # optional: overrides the default
     seed_start = 0        # optional: seeds seed_start .. seed_start + episodes - 1
 
-A configuration's env id must be one of ours or of the tasks still to come (``PLANNED_ENV_IDS``), which are
-reported as not available rather than dropped. Every mistake is reported with the file and line.
+A configuration's env id must be one of ours. Every mistake is reported with the file and line.
 """
 
 from __future__ import annotations
@@ -29,9 +28,6 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill_space.envs import TASKS
 from mani_skill_space.envs.base import SpaceManipulationEnv
 from mani_skill_space.kwarg_checks import KwargError
-
-PLANNED_ENV_IDS: tuple[str, ...] = ()
-"""Tasks of the benchmark that this version does not implement yet."""
 
 SUITE_KEYS = {"name", "description", "episodes", "seed_start", "configurations"}
 CONFIGURATION_KEYS = {"name", "env_id", "kwargs", "episodes", "seed_start"}
@@ -54,10 +50,6 @@ class Configuration:
     @property
     def seeds(self) -> list[int]:
         return list(range(self.seed_start, self.seed_start + self.episodes))
-
-    @property
-    def available(self) -> bool:
-        return self.env_id in TASKS
 
 
 @dataclass(frozen=True)
@@ -123,14 +115,13 @@ def _configuration(entry: dict, index: int, locate: "_Locator", episodes: int, s
     env_id = entry.get("env_id")
     if env_id is None:
         raise SuiteError(f"{locate.where(index, None)}: configuration without env_id")
-    if env_id not in TASKS and env_id not in PLANNED_ENV_IDS:
-        valid = ", ".join([*TASKS, *PLANNED_ENV_IDS])
+    if env_id not in TASKS:
+        valid = ", ".join(TASKS)
         raise SuiteError(f"{locate.where(index, 'env_id')}: unknown env id {env_id!r}; valid choices: {valid}")
     kwargs = entry.get("kwargs", {})
     if not isinstance(kwargs, dict):
         raise SuiteError(f"{locate.where(index, 'kwargs')}: kwargs must be a table")
-    if env_id in TASKS:
-        _check_kwargs(TASKS[env_id], kwargs, locate, index)
+    _check_kwargs(TASKS[env_id], kwargs, locate, index)
     return Configuration(
         name=entry.get("name") or _default_name(env_id, kwargs),
         env_id=env_id,

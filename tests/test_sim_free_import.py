@@ -3,7 +3,7 @@ import sys
 import textwrap
 
 
-def test_sim_free_modules_import_without_sapien_or_maniskill():
+def test_every_procgen_module_and_the_sim_free_maths_import_without_sapien_or_maniskill():
     code = textwrap.dedent(
         """
         import importlib.machinery, sys
@@ -13,8 +13,12 @@ def test_sim_free_modules_import_without_sapien_or_maniskill():
                 return None  # as if SAPIEN and ManiSkill were not installed
             return path_finder(name, path, target)
         importlib.machinery.PathFinder.find_spec = classmethod(hide_simulator)
-        import mani_skill_space.procgen.rock, mani_skill_space.procgen.terrain, mani_skill_space.procgen.mounts, mani_skill_space.procgen.peg_hole
-        import mani_skill_space.domains, mani_skill_space.rewards, mani_skill_space.geometry
+        import importlib, pkgutil
+        import mani_skill_space.procgen
+        modules = [m.name for m in pkgutil.iter_modules(mani_skill_space.procgen.__path__, "mani_skill_space.procgen.")]
+        assert len(modules) >= 14, modules
+        for name in [*modules, "mani_skill_space.domains", "mani_skill_space.rewards", "mani_skill_space.geometry"]:
+            importlib.import_module(name)
         assert "sapien" not in sys.modules and "mani_skill" not in sys.modules
         mani_skill_space.procgen.rock.make_rock(0)
         print("ok")

@@ -18,7 +18,7 @@ kwargs = { domain = "moon", asset_source = "dataset" }
 
 [[configurations]]
 name = "later"
-env_id = "FutureTask-v1"
+env_id = "PegInHoleAssembly-v1"
 episodes = 1
 """
 
@@ -29,18 +29,12 @@ def _write(tmp_path, text):
     return path
 
 
-@pytest.fixture(autouse=True)
-def planned_task(monkeypatch):
-    """Every task of the benchmark exists now: pretend one is still to come."""
-    monkeypatch.setattr(suites, "PLANNED_ENV_IDS", ("FutureTask-v1",))
-
-
 def test_a_suite_lists_its_configurations_with_seed_ranges(tmp_path):
     suite = load_suite(_write(tmp_path, GOOD))
     first, later = suite.configurations
     assert suite.name == "tiny"
-    assert first.name == "SampleCollection-v1/moon/dataset" and first.seeds == [7, 8, 9] and first.available
-    assert later.name == "later" and later.seeds == [7] and not later.available
+    assert first.name == "SampleCollection-v1/moon/dataset" and first.seeds == [7, 8, 9]
+    assert later.name == "later" and later.env_id == "PegInHoleAssembly-v1" and later.seeds == [7]
     assert first.line == 6
 
 
@@ -74,14 +68,12 @@ def test_shipped_smoke_suite_covers_every_task_domain_and_asset_source():
     covered = {(c.env_id, c.kwargs["domain"], c.kwargs["asset_source"]) for c in suite.configurations}
     expected = {(env_id, d, s) for env_id, cls in TASKS.items() for d in cls.SUPPORTED_DOMAINS for s in cls.SUPPORTED_ASSET_SOURCES}
     assert covered == expected
-    assert all(c.available for c in suite.configurations)
 
 
 def test_shipped_corl2024_suite_has_the_papers_six_configurations_of_200_episodes():
     suite = load_suite("tasks/corl2024.toml")
     assert len(suite.configurations) == 6
     assert all(c.episodes == 200 for c in suite.configurations)
-    assert {c.env_id for c in suite.configurations if not c.available} <= set(suites.PLANNED_ENV_IDS)
     tubes = next(c for c in suite.configurations if c.name == "sample-collection/sample-tubes")
     assert tubes.kwargs == {"domain": "mars", "asset_source": "dataset"}
 
@@ -92,10 +84,9 @@ def test_accepted_kwargs_cover_the_task_the_base_class_and_maniskill():
 
 
 @pytest.mark.parametrize("path", sorted(Path("tasks").glob("*.toml")), ids=lambda p: p.name)
-def test_every_shipped_suite_loads_with_every_task_available(path, monkeypatch):
-    monkeypatch.setattr(suites, "PLANNED_ENV_IDS", ())
+def test_every_shipped_suite_loads(path):
     suite = load_suite(path)
-    assert suite.configurations and all(c.available for c in suite.configurations)
+    assert suite.configurations and all(c.env_id in TASKS for c in suite.configurations)
 
 
 def test_shipped_suites_are_the_repositorys_tasks_folder():

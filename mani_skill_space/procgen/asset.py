@@ -74,11 +74,6 @@ class Asset:
         return float(props.mass), np.asarray(props.center_mass), np.asarray(props.inertia)
 
 
-def convex_part(points: np.ndarray) -> CollisionPart:
-    """Convex hull of ``points`` as a collision part."""
-    return CollisionPart(trimesh.convex.convex_hull(np.asarray(points, dtype=np.float64)), convex=True)
-
-
 def box_mesh(half_size, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
     mesh = trimesh.creation.box(extents=2 * np.asarray(half_size, dtype=np.float64))
     mesh.apply_translation(center)

@@ -77,7 +77,6 @@ HANDLE_STANDOFF = 0.045
 
 PANEL_FRAME_COLOR = (0.72, 0.74, 0.77, 1.0)
 CELL_COLOR = (0.08, 0.12, 0.38, 1.0)
-HANDLE_COLOR = (0.15, 0.15, 0.16, 1.0)
 
 MIN_POST_WALL = RECEPTACLE_WALL
 """The thinnest socket wall the generator makes: as thin as the panel's receptacle walls, the thinnest part the task
