@@ -57,9 +57,17 @@ def check_args(args: replay_trajectory.Args) -> None:
         check_env_kwargs(TASKS[env_id], env_kwargs)
 
 
+def _replay_in_worker(job):
+    """ManiSkill's per-process replay, reached through this module so that a spawned worker, which unpickles the
+    function by its module's name, imports mani_skill_space (registering our envs) before it makes an env."""
+    return replay_trajectory._main(*job)
+
+
 def main(args: replay_trajectory.Args) -> None:
     with checking_inputs():
         check_args(args)
+    # ManiSkill's pool maps its module-level ``_main_helper``; swapping it in is how workers learn our envs
+    replay_trajectory._main_helper = _replay_in_worker
     replay_trajectory.main(args)
 
 

@@ -53,7 +53,8 @@ def test_a_recorded_demo_replays_to_the_same_final_state(recorded):
 
 
 def test_maniskill_replay_converts_demos_to_ee_delta_pose_and_the_dataset_loads_them(recorded):
-    command = [sys.executable, "-m", "mani_skill_space.replay", "--traj-path", recorded.path, "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj"]
+    # two worker processes: each must know our env ids
+    command = [sys.executable, "-m", "mani_skill_space.replay", "--traj-path", recorded.path, "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj", "-n", "2"]
     result = subprocess.run(command, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "Replayed 3 episodes, 3/3" in result.stdout

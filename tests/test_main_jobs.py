@@ -30,3 +30,11 @@ def test_bench_prints_a_table_with_ratios_against_maniskill(capsys):
     assert {"rock (lunar)", "rock (martian)", "terrain (moon)", "rover", "peg and hole pair (procedural)"} <= set(report.assets_ms)
     table = capsys.readouterr().out
     assert "| SampleCollection-v1 env.step/s (state) |" in table and "x |" in table
+
+
+def test_procedural_variety_picture_has_a_panel_per_kind_and_differs_by_seed():
+    picture = showcase.procedural_variety(count=4, solar_count=1, panel_size=96)
+    assert picture.shape == (96, 4 * 96, 3) and picture.dtype == np.uint8
+    panels = np.split(picture[20:], 4, axis=1)  # below the labels
+    assert all(panel.std() > 5 for panel in panels)
+    assert not np.array_equal(picture, showcase.procedural_variety(count=4, solar_count=1, panel_size=96, seed=1))

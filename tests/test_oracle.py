@@ -54,7 +54,7 @@ def test_oracle_captures_debris(domain, asset_source, seed):
     env.close()
 
 
-@pytest.mark.parametrize("domain, asset_source, seed", [("moon", "dataset", 3), ("mars", "procedural", 4003)])
+@pytest.mark.parametrize("domain, asset_source, seed", [("moon", "dataset", 3), ("mars", "procedural", 4000)])
 def test_oracle_assembles_the_solar_panel(domain, asset_source, seed):
     env = gym.make("SolarPanelAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
     result = run_episode(env, oracle_for("SolarPanelAssembly-v1"), seed)

@@ -3,10 +3,8 @@ import numpy as np
 import pytest
 import sapien
 import torch
-from mani_skill.utils.registration import REGISTERED_ENVS
 
-import mani_skill_space
-from mani_skill_space.envs import SampleCollectionEnv, task_class
+from mani_skill_space.envs import SampleCollectionEnv
 
 ENV_ID = "SampleCollection-v1"
 DOMAINS = SampleCollectionEnv.SUPPORTED_DOMAINS
@@ -19,42 +17,13 @@ def make(**kwargs):
     return gym.make(ENV_ID, **kwargs)
 
 
-def test_env_id_is_registered_with_the_reference_episode_duration():
-    assert ENV_ID in mani_skill_space.ENV_IDS
-    assert REGISTERED_ENVS[ENV_ID].cls is SampleCollectionEnv is task_class(ENV_ID)
-    assert gym.spec(ENV_ID).max_episode_steps == SampleCollectionEnv.nominal_episode_steps() == 150
-    assert SampleCollectionEnv.nominal_episode_steps() / SampleCollectionEnv.CONTROL_FREQ == 7.5
-
-
-def test_default_control_mode_is_ee_delta_pose_and_other_modes_work():
-    env = make()
-    assert env.unwrapped.control_mode == "pd_ee_delta_pose"
-    assert env.action_space.shape == (7,)
-    env.close()
+def test_other_control_modes_work():
     for mode in ("pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos"):
         env = make(control_mode=mode)
         env.reset(seed=0)
         _, reward, *_ = env.step(env.action_space.sample())
         assert torch.isfinite(reward).all()
         env.close()
-
-
-@pytest.mark.parametrize("obs_mode", ["state", "rgbd"])
-@pytest.mark.parametrize("asset_source", SOURCES)
-@pytest.mark.parametrize("domain", DOMAINS)
-def test_reset_and_step_in_every_domain_and_asset_source(domain, asset_source, obs_mode):
-    env = make(domain=domain, asset_source=asset_source, obs_mode=obs_mode, render_backend="cpu" if obs_mode != "state" else "none")
-    obs, info = env.reset(seed=3)
-    for _ in range(3):
-        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
-    assert reward.shape == (1,) and torch.isfinite(reward).all()
-    assert set(info["reward_terms"]) == set(SampleCollectionEnv.REWARD_TABLE.names)
-    assert all(torch.isfinite(v).all() for v in info["reward_terms"].values())
-    if obs_mode == "state":
-        assert obs.ndim == 2 and obs.shape[0] == 1 and torch.isfinite(obs).all()
-    else:
-        assert set(obs["sensor_data"]) == {"base_camera", "wrist_camera"}
-    env.close()
 
 
 def test_cameras_are_base_and_wrist_rgbd_at_64_by_64():
@@ -87,58 +56,9 @@ def test_wrist_camera_robot_adds_its_hand_camera():
     env.close()
 
 
-@pytest.mark.parametrize("domain", DOMAINS)
-def test_scene_gravity_is_the_domain_gravity(domain):
-    env = make(domain=domain)
-    gravity = env.unwrapped.scene.px.config.gravity
-    np.testing.assert_allclose(gravity, [0, 0, -mani_skill_space.domains.DOMAINS[domain].gravity], rtol=1e-6)
-    env.close()
-
-
-@pytest.mark.parametrize(
-    "kwargs, message",
-    [
-        (dict(domain="orbit"), "valid choices: moon, mars, earth, asteroid"),
-        (dict(domain="venus"), "valid choices: moon, mars, earth, asteroid"),
-        (dict(asset_source="cad"), "valid choices: procedural, dataset"),
-        (dict(robot_uids="fetch"), "valid choices: panda, panda_wristcam"),
-    ],
-)
-def test_bad_kwargs_raise_errors_naming_the_valid_choices(kwargs, message):
-    with pytest.raises(ValueError, match=message):
-        make(**kwargs)
-
-
 def _sample_state(env):
     u = env.unwrapped
     return u._placement.points.clone(), u.sample.pose.raw_pose.clone(), u.agent.robot.get_qpos().clone()
-
-
-def test_same_seed_gives_the_same_rock_and_initial_state():
-    a, b = make(), make()
-    obs_a, _ = a.reset(seed=11)
-    obs_b, _ = b.reset(seed=11)
-    for x, y in zip(_sample_state(a), _sample_state(b)):
-        torch.testing.assert_close(x, y, rtol=0, atol=0)
-    torch.testing.assert_close(obs_a, obs_b, rtol=0, atol=0)
-    b.reset(seed=12)
-    assert not torch.equal(a.unwrapped.sample.pose.raw_pose, b.unwrapped.sample.pose.raw_pose)
-    a.close(), b.close()
-
-
-def test_same_seed_and_actions_give_the_same_rollout_on_cpu():
-    actions = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (25, 1, 7)), dtype=torch.float32)
-    rollouts = []
-    for _ in range(2):
-        env = make()
-        obs, _ = env.reset(seed=4)
-        trajectory = [obs]
-        for action in actions:
-            obs, reward, *_ = env.step(action)
-            trajectory += [obs, reward]
-        rollouts.append(torch.cat([t.reshape(-1) for t in trajectory]))
-        env.close()
-    torch.testing.assert_close(rollouts[0], rollouts[1], rtol=0, atol=0)
 
 
 def test_reconfiguration_resamples_the_rock():
@@ -178,33 +98,6 @@ def test_sample_resting_in_the_bin_is_success_and_on_the_ground_is_not(asset_sou
     env.close()
 
 
-def test_success_gives_the_maximum_reward_in_every_reward_mode():
-    for mode, expected in [("dense", 77.0), ("normalized_dense", 1.0), ("sparse", 1.0)]:
-        env = make(reward_mode=mode)
-        env.reset(seed=0)
-        u = env.unwrapped
-        inside = (u.bin_target[0] - torch.tensor([0, 0, 0.03])).tolist()
-        _place_sample(env, inside)
-        info = u.get_info()
-        reward = u.get_reward(obs=None, action=torch.zeros(1, 7), info=info)
-        assert info["success"].item()
-        assert reward.item() == pytest.approx(expected)
-        env.close()
-
-
-def test_dense_reward_is_the_sum_of_the_reported_terms_and_normalised_is_in_unit_interval():
-    env = make(reward_mode="dense")
-    env.reset(seed=5)
-    table = SampleCollectionEnv.REWARD_TABLE
-    for _ in range(10):
-        _, reward, _, _, info = env.step(env.action_space.sample())
-        assert not info["success"].item()
-        assert reward.item() == pytest.approx(sum(v.item() for v in info["reward_terms"].values()), abs=1e-5)
-        normalised = table.normalize(reward)
-        assert 0.0 <= normalised.item() <= 1.0
-    env.close()
-
-
 @pytest.mark.parametrize("asset_source", SOURCES)
 def test_sample_starts_at_rest_on_the_ground_in_front_of_the_rover(asset_source):
     for domain in DOMAINS:
@@ -221,18 +114,6 @@ def test_sample_starts_at_rest_on_the_ground_in_front_of_the_rover(asset_source)
             # a rock hardly turns; the tube (a 24-sided prism) may roll onto a neighbouring side (15 deg)
             assert turned < (5.0 if asset_source == "procedural" else 16.0), (domain, seed, turned)
         env.close()
-
-
-def test_every_body_really_has_its_collision_shapes():
-    env = make()
-    env.reset(seed=0)
-    u = env.unwrapped
-    for actor, expected in [(u.sample, None), (u.mount_actor, len(u.mount.collision_parts)), (u.ground, 1)]:
-        for entity in actor._objs:
-            body = entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent)
-            shapes = body.get_collision_shapes()
-            assert len(shapes) >= 1 and (expected is None or len(shapes) == expected)
-    env.close()
 
 
 def test_per_env_sample_is_a_merged_actor_in_the_state_registry():
@@ -253,9 +134,11 @@ def test_state_round_trip_restores_the_observation():
         env.step(env.action_space.sample())
     env.unwrapped.set_state_dict(state)
     restored = env.unwrapped.get_obs()
-    # time and the last physics step's joint forces are not part of the simulation state
-    for group, name in [("agent", "qpos"), ("agent", "qvel"), ("extra", "tcp_pos"), ("extra", "sample_pos_in_tcp"), ("extra", "sample_to_bin")]:
-        torch.testing.assert_close(restored[group][name], obs[group][name], atol=1e-5, rtol=1e-5)
+    # the state carries the elapsed steps and the wrist wrench too, so every entry comes back
+    for group in ("agent", "extra"):
+        assert restored[group].keys() == obs[group].keys()
+        for name in obs[group]:
+            torch.testing.assert_close(restored[group][name], obs[group][name], atol=1e-5, rtol=1e-5, msg=f"{group}/{name}")
     env.close()
 
 
