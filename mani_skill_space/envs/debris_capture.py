@@ -67,7 +67,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
     - the start: (1.0, 0, 0.5) m +- 0.25 m per axis, a uniformly random orientation; the drift toward the arm
       0.15-0.25 m/s with up to +-0.05 m/s sideways and vertically, and a tumble of up to +-pi rad/s per axis,
       all at `difficulty=1` (the reference's ranges); `difficulty` d scales the speeds by 0.4 + 0.6 d and the
-      tumble by d (0: slow, no tumble; above 1: harder). On the asteroid the debris is also tossed upward just
+      tumble by d, d in [0, 2] (0: slow, no tumble; above 1: harder). On the asteroid the debris is also tossed upward just
       enough to come back to its starting height where the arm reaches (a low arc, peaking halfway)
 
     **Success Conditions:**

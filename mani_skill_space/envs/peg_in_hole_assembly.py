@@ -73,7 +73,7 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
       20 x 20 mm square profile peg, 100 or 200 mm long (drawn per env), and its 22 x 22 mm, 20 mm deep socket
       on a 50 x 50 mm post; `asset_source="procedural"` gives a peg with a random profile (circle or 3-12 sided
       polygon, squashed), size and taper, and a module with the matching hole cut at a random offset, tilt
-      (up to 20 deg) and depth, `clearance` (default 1 mm) wider than the peg
+      (up to 20 deg) and depth, `clearance` (default 1 mm, at most 7 mm) wider than the peg
     - the peg lies on a random stable side 0.24-0.28 m in front of the module, y within +-5 cm, its tip
       toward the arm within +-11 deg; for procedural pairs, only on a side from which the arm can take it and
       hold it over the hole (`envs.insertion.reachable_faces`; a pair with no such side is drawn again, and

@@ -111,7 +111,7 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
       the reference's 20 x 20 mm profile pegs (0.1 and 0.2 m), 22 x 22 mm sockets 20 mm deep on 50 x 50 mm
       posts and the reference panel; `asset_source="procedural"` draws one profile (a 3-8 sided polygon,
       radius 10-16 mm, squashed by 0.6-1) for all four pegs, short pegs 0.09-0.12 m (long ones 0.1 m
-      longer), sockets 20-30 mm deep with `clearance` (default 1 mm), and the panel's size (0.9-1.1x per side,
+      longer), sockets 20-30 mm deep with `clearance` (default 1 mm, at most 1.96 mm), and the panel's size (0.9-1.1x per side,
       the sockets and receptacles moving with it)
     - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg
       (for procedural sets, only on a side from which the arm can hold it over its socket:
