@@ -112,11 +112,11 @@ class Oracle(Policy):
     def hold_action(self) -> np.ndarray:
         return np.hstack([self.arm_qpos(), self.gripper]).astype(np.float32)
 
-    def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0, speed: float = 1.0) -> Iterator[np.ndarray]:
+    def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0, speed: float = 1.0, acceleration: float = 1.0) -> Iterator[np.ndarray]:
         """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
-        collision-free IK solution) at ``speed`` times the usual joint limits; ``settle_steps`` more steps hold
-        the goal so the arm catches up."""
-        with self._speed(speed):
+        collision-free IK solution) at ``speed`` times the usual joint limits (and ``acceleration`` times the
+        usual accelerations, on top); ``settle_steps`` more steps hold the goal so the arm catches up."""
+        with self._speed(speed, acceleration):
             positions = self._screw_path(self.arm_qpos(), pose)
             if positions is None:
                 positions = self._joint_path(pose, what)
@@ -138,10 +138,10 @@ class Oracle(Policy):
             self.solver.planner.update_point_cloud(previous)
 
     @contextmanager
-    def _speed(self, scale: float):
+    def _speed(self, scale: float, acceleration_scale: float = 1.0):
         planner = self.solver.planner
         velocity, acceleration = planner.joint_vel_limits, planner.joint_acc_limits
-        planner.joint_vel_limits, planner.joint_acc_limits = velocity * scale, acceleration * scale
+        planner.joint_vel_limits, planner.joint_acc_limits = velocity * scale, acceleration * scale * acceleration_scale
         try:
             yield
         finally:
@@ -168,12 +168,15 @@ class Oracle(Policy):
         positions = self._screw_path(start, pose)
         return positions[-1] if positions is not None else self._free_joint_goal(start, pose)
 
-    def joint_move(self, goal: np.ndarray, what: str) -> Iterator[np.ndarray]:
-        """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised."""
+    def joint_move(self, goal: np.ndarray, what: str, acceleration: float = 1.0) -> Iterator[np.ndarray]:
+        """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised (at ``acceleration``
+        times the usual joint accelerations)."""
         start = self.arm_qpos()
         if not self.path_is_free(start, goal):
             raise PlanningFailed(f"the joint-space move to the {what} pose collides")
-        yield from self._follow(self._timed_path(start, goal))
+        with self._speed(1.0, acceleration):
+            path = self._timed_path(start, goal)
+        yield from self._follow(path)
 
     def _timed_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         if np.abs(goal - start).max() < 1e-4:  # already there (the parameterisation needs a path to follow)

@@ -109,6 +109,9 @@ class InsertionSettings:
     """How far (m) the tip goes down the hole's axis per control step while inserting."""
     refine_passes: int = 2
     """How often the tip is re-lined up over the entrance, re-measuring the peg in the hand, before the push."""
+    pre_grasp_acceleration: float = 1.0
+    """Joint accelerations, as a multiple of the oracle's usual ones, of the empty hand's motion to the pre-grasp
+    pose."""
 
 
 class PegInserter:
@@ -135,7 +138,7 @@ class PegInserter:
         bottom, depth = target.bottom, target.depth
 
         with self._reaching():
-            yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp")
+            yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp", acceleration=self.settings.pre_grasp_acceleration)
             yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
             yield from self.oracle.set_gripper(GRIPPER_CLOSED)
             yield from self.oracle.wait_for_grasp(target.peg, "the peg")

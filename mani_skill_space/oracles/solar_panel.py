@@ -14,7 +14,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, POINT_SPACING, Oracle, PlanningFailed, backed_off, raised, surface_points
 from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget
 
 INSERTION_ORDER = (2, 3, 0, 1)
@@ -27,19 +27,36 @@ PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
 STILL_IN_FRACTION = 0.8
+PEG_MARGIN = 0.01
+"""The arm keeps about this far (m) from the pegs already standing in their sockets, sampled this densely: at the
+usual 2 cm spacing an open finger can pass between two points on a standing peg's top and knock it out of its
+socket. (Not around the pegs still lying on the deck: the hand must reach between them.)"""
 PANEL_PRE_GRASP = 0.1
 PANEL_LEVEL_ACROSS = 0.5
 """The bar's across direction must be at least this level (horizontal length of the unit vector) to be taken
 from above."""
-PANEL_LIFT = 0.3
-"""How far (m) the panel goes straight up off the deck before swinging round."""
+PANEL_LIFTS = (0.3, 0.2, 0.12)
+"""How far (m) the panel goes straight up off the deck before swinging round: the first height a straight screw
+motion reaches (a joint-space move there would swing the panel, which the planner does not see, through the
+pegs already standing)."""
+PANEL_SERVO_LIFT_STEP = 0.015
+FREE_SPACE_ACCELERATION = 2.0
+"""Joint accelerations, as a multiple of the usual ones, of the motions of an empty hand to its next grasp and of
+the panel's swing high over the pegs: four pegs and a panel in 50 s. (Not while a peg is in the hand, where a
+brisker swing turns it between the fingers, nor right after letting go of one.)"""
 PLACE_GAP = 0.05
 """The panel is lined up this far above its seat (its receptacles clear of the pegs' tops) before going down."""
+SWING_GAPS = (0.2, 0.12, PLACE_GAP)
+"""The panel is swung round to this far above its seat (the first the arm reaches), then goes straight down to
+PLACE_GAP: the planner does not see the panel in the hand, and a swing that ends low would sweep it through the
+pegs' tops."""
 PLACE_STEP = 0.004
 PLACE_PRESS = 0.004
 
 
-PEG_INSERTION = InsertionSettings(lift_height=PEG_LIFT_HEIGHT, relax_steps=6, insert_attempts=2, insert_step=0.004, refine_passes=1)
+PEG_INSERTION = InsertionSettings(
+    lift_height=PEG_LIFT_HEIGHT, relax_steps=6, insert_attempts=2, insert_step=0.004, refine_passes=1, pre_grasp_acceleration=FREE_SPACE_ACCELERATION
+)
 """Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg; the push eases off before
 letting go (in orbit a peg let go while pressed into its socket springs back out of it), and a jammed push is
 tried again."""
@@ -66,29 +83,33 @@ class SolarPanelOracle(Oracle):
         yield from self.wait_for_success(20)
 
     def _obstacles(self, env, exclude_peg: int = -1) -> np.ndarray:
-        """The socket posts, the other pegs where they are now and the panel where it is now, as the planner's
-        obstacle points (the insertion leaves out the keep-out around its socket's axis while it lowers a peg in)."""
+        """The socket posts, the other pegs where they are now (those already standing in their sockets with a
+        margin) and, while the pegs go in, the panel where it is now, as the planner's obstacle points (the
+        insertion leaves out the keep-out around its socket's axis while it lowers a peg in)."""
         base = np.eye(4)
         base[:3, 3] = env.socket_base.pose.p[0].cpu().numpy()
         points = [surface_points(env.socket_assets[0], base)]
+        standing = INSERTION_ORDER[: INSERTION_ORDER.index(exclude_peg)] if exclude_peg >= 0 else INSERTION_ORDER
         for i, peg in enumerate(env.pegs):
             if i != exclude_peg:
-                points.append(surface_points(env.peg_assets[0][i], peg.pose.sp.to_transformation_matrix()))
-        if exclude_peg >= 0:  # while the pegs go in, the panel is still on the deck
+                pose = peg.pose.sp.to_transformation_matrix()
+                margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
+                points.append(surface_points(env.peg_assets[0][i], pose, *margin))
+        if exclude_peg >= 0:
             points.append(surface_points(env.panel_assets[0], env.panel.pose.sp.to_transformation_matrix()))
         return np.concatenate(points)
 
     # ------------------------------------------------------------------ panel
     def place_panel(self, env) -> Iterator[np.ndarray]:
         grasp = self._panel_grasp(env)
-        yield from self.screw_to(backed_off(grasp, PANEL_PRE_GRASP), "panel pre-grasp")
+        yield from self.screw_to(backed_off(grasp, PANEL_PRE_GRASP), "panel pre-grasp", acceleration=FREE_SPACE_ACCELERATION)
         yield from self.screw_to(grasp, "panel grasp", SETTLE_STEPS)
         yield from self.set_gripper(GRIPPER_CLOSED)
         yield from self.wait_for_grasp(env.panel, "the panel's bar")
-        yield from self.screw_to(raised(self.tcp_pose(), PANEL_LIFT), "panel lift")
+        yield from self._lift_panel()
 
         arm = self._over_target(env)
-        yield from self.joint_move(arm, "over the target")
+        yield from self.joint_move(arm, "over the target", FREE_SPACE_ACCELERATION)
         for _ in range(2):
             yield from self.screw_to(self._tcp_for_seat(env, PLACE_GAP), "panel line-up", SETTLE_STEPS)
         steps = int(np.ceil((PLACE_GAP + PLACE_PRESS) / PLACE_STEP))
@@ -96,6 +117,17 @@ class SolarPanelOracle(Oracle):
         yield from self.servo(lambda step: self._tcp_for_seat(env, height(step)), steps + SETTLE_STEPS, "lower the panel")
         yield from self.open_gently(8)
         yield from self.screw_to(raised(self.tcp_pose(), RETREAT_DISTANCE), "retreat")
+
+    def _lift_panel(self) -> Iterator[np.ndarray]:
+        """Straight up, as high as a screw motion goes (PANEL_LIFTS); failing all, by servoing the hand up the
+        vertical line step by step (it stops where the arm can go no higher)."""
+        for height in PANEL_LIFTS:
+            path = self._screw_path(self.arm_qpos(), raised(self.tcp_pose(), height))
+            if path is not None:
+                yield from self._follow(path)
+                return
+        start, steps = self.tcp_pose(), int(np.ceil(PANEL_LIFTS[0] / PANEL_SERVO_LIFT_STEP))
+        yield from self.servo(lambda step: raised(start, min(PANEL_LIFTS[0], (step + 1) * PANEL_SERVO_LIFT_STEP)), steps + SETTLE_STEPS, "panel lift")
 
     def _panel_grasp(self, env) -> sapien.Pose:
         """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches."""
@@ -111,13 +143,14 @@ class SolarPanelOracle(Oracle):
         raise PlanningFailed("the arm cannot reach down to the panel's bar")
 
     def _over_target(self, env) -> np.ndarray:
-        """An arm configuration holding the panel PLACE_GAP above its seat (either way round), reached by a
-        straight joint move."""
+        """An arm configuration holding the panel high above its seat (SWING_GAPS, either way round), reached by
+        a straight joint move."""
         start = self.arm_qpos()
-        for half_turns in (0, 1):
-            for arm in self.ik_solutions(self._tcp_for_seat(env, PLACE_GAP, half_turns)):
-                if self.path_is_free(start, arm):
-                    return arm
+        for gap in SWING_GAPS:
+            for half_turns in (0, 1):
+                for arm in self.ik_solutions(self._tcp_for_seat(env, gap, half_turns)):
+                    if self.path_is_free(start, arm):
+                        return arm
         raise PlanningFailed("no arm configuration holds the panel over its target")
 
     def _tcp_for_seat(self, env, height: float, half_turns: int = None) -> sapien.Pose:
