@@ -27,9 +27,11 @@ from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cl
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.domains import DOMAINS
 from mani_skill_space.envs import task_class
+from mani_skill_space.envs.peg_in_hole_assembly import reachable_peg_hole_pair
+from mani_skill_space.envs.solar_panel_assembly import reachable_solar_set
 from mani_skill_space.procgen.debris import make_debris
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE, make_peg_hole_pair
 from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.procgen.solar_panel import make_panel, make_socket_base, make_solar_layout, make_solar_pegs
 from mani_skill_space.procgen.terrain import make_terrain
@@ -131,8 +133,11 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     for name in ("moon", "mars", "asteroid"):
         generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
+    arm_base = make_rover().frames["arm_mount"][:3, 3]
+    generators["peg and hole pair (as the env draws it: reachability check, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
+    generators["solar panel set (as the env draws it: reachability check, redraws)"] = lambda seed: _reachable_solar_panel_set(seed, arm_base)
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
@@ -142,6 +147,11 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
 def _solar_panel_set(seed: int) -> tuple:
     layout = make_solar_layout(seed)
     return make_socket_base(layout), make_solar_pegs(layout, seed), make_panel(layout)
+
+
+def _reachable_solar_panel_set(seed: int, arm_base) -> tuple:
+    layout, pegs = reachable_solar_set(seed, DEFAULT_CLEARANCE, arm_base)
+    return make_socket_base(layout), pegs, make_panel(layout)
 
 
 def bench_assets(args: Args, report: Report) -> None:

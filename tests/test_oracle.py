@@ -37,7 +37,7 @@ def test_unknown_env_has_no_oracle():
 
 @pytest.mark.parametrize(
     "domain, asset_source, seed",
-    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 2), ("mars", "procedural", 101)],
+    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 2), ("mars", "procedural", 101), ("orbit", "procedural", 3), ("earth", "procedural", 4)],
 )
 def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
     env = gym.make("PegInHoleAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
@@ -54,7 +54,11 @@ def test_oracle_captures_debris(domain, asset_source, seed):
     env.close()
 
 
-@pytest.mark.parametrize("domain, asset_source, seed", [("moon", "dataset", 3), ("mars", "procedural", 4000)])
+@pytest.mark.parametrize(
+    "domain, asset_source, seed",
+    # the orbital seeds failed before the panel was swung high over the pegs and the arm kept clear of standing pegs
+    [("moon", "dataset", 3), ("mars", "procedural", 4000), ("orbit", "dataset", 4003), ("orbit", "procedural", 4005)],
+)
 def test_oracle_assembles_the_solar_panel(domain, asset_source, seed):
     env = gym.make("SolarPanelAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
     result = run_episode(env, oracle_for("SolarPanelAssembly-v1"), seed)
