@@ -159,6 +159,10 @@ def _render_kits(kits: list[list[Placed]], size: int) -> np.ndarray:
     _add_visual(scene, floor, np.eye(4), np.zeros(3))
     top = max(float(high[2]) for _, high in bounds)
     eye, target = _camera_seeing(np.array([-span[0] / 2, -span[1] / 2, 0.0]), np.array([span[0] / 2, span[1] / 2, top]))
+    # SAPIEN's camera shader and picture format are process-wide, and an env made before may have left ManiSkill's
+    # "minimal" pack (8-bit colour, no shadows) in place: ask for the default one, as ManiSkill does per camera
+    sapien.render.set_camera_shader_dir("default")
+    sapien.render.set_picture_format("Color", "r32g32b32a32sfloat")
     camera = scene.add_camera("variety", 2 * size, 2 * size, VARIETY_CAMERA_FOVY, 0.01, 10 * float(np.linalg.norm(eye - target)))
     camera.entity.set_pose(sapien.Pose(look_at(eye, target)))
     scene.update_render()

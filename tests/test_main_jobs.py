@@ -1,6 +1,7 @@
 """The README's main job and the benchmark CLI run end to end (output checked, never timed)."""
 
 import numpy as np
+import sapien
 from PIL import Image
 
 from mani_skill_space import bench, showcase
@@ -33,6 +34,9 @@ def test_bench_prints_a_table_with_ratios_against_maniskill(capsys):
 
 
 def test_procedural_variety_picture_has_a_panel_per_kind_and_differs_by_seed():
+    # as an env with ManiSkill's "minimal" shader pack leaves SAPIEN's process-wide settings (8-bit colour)
+    sapien.render.set_camera_shader_dir("minimal")
+    sapien.render.set_picture_format("Color", "r8g8b8a8unorm")
     picture = showcase.procedural_variety(count=4, solar_count=1, panel_size=96)
     assert picture.shape == (96, 4 * 96, 3) and picture.dtype == np.uint8
     panels = np.split(picture[20:], 4, axis=1)  # below the labels
