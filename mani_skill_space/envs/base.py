@@ -31,7 +31,7 @@ from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConf
 
 from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
-from mani_skill_space.envs.building import build_actor_per_env, build_asset_actor, build_flat_ground, build_skydome, padded_points
+from mani_skill_space.envs.building import bounding_radius, build_actor_per_env, build_asset_actor, build_dynamic_per_env, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.kwarg_checks import KwargError, checked_choice, checked_natural, checked_number
 from mani_skill_space.procgen.asset import Asset, look_at
@@ -47,6 +47,9 @@ ENV_SPACING = 2 * TERRAIN_HALF_EXTENT + 2.0
 """GPU sub-scenes share one physics world: keep each env's terrain clear of its neighbours'."""
 GRASP_MIN_FORCE = 5.0
 """Grasped = both fingers press on the object with more than 5 N (reference definition)."""
+FINGER_REACH = 0.15
+"""m: no point of the Panda's fingers (open or closed) or finger links is farther than this from the TCP (they
+reach about 0.07 m): an object whose collision geometry is farther from the TCP cannot be touched by them."""
 ARM_CONTACT_LIMIT = 10.0
 """Contact force (N) on an arm link above which the undesired-contact penalty applies."""
 WRIST_CAMERA_EYE = (0.1, 0.0, -0.07)
@@ -208,6 +211,7 @@ class SpaceManipulationEnv(BaseEnv):
 
     def _load_domain_scene(self):
         """Mount, sky, ground and the sun's direction for every env (call first in ``_load_scene``)."""
+        self._graspable_radius: dict[str, float] = {}
         self.mount_actor = build_asset_actor(self.scene, self.mount, "mount", body_type="static")
         self._sun_directions = [sample_sun_direction(np.random.default_rng(s)) for s in self._asset_seeds()]
         if self.scene.can_render():
@@ -300,7 +304,27 @@ class SpaceManipulationEnv(BaseEnv):
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
         return self.REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
 
+    def build_graspable(self, assets: list[Asset], name: str, never_sleep: bool = False):
+        """The per-env dynamic object made of ``assets`` (``building.build_dynamic_per_env``), remembered with its
+        bounding radius so that ``is_grasping`` can skip its contact query when it is out of the fingers' reach.
+        ``never_sleep``: PhysX never puts it to sleep, however slowly it moves (in zero gravity a slow drift is
+        real motion, e.g. of a part let go in orbit)."""
+        actor = build_dynamic_per_env(self.scene, assets, name)
+        if never_sleep:
+            for body in actor._bodies:
+                body.sleep_threshold = 0.0
+        self._graspable_radius[name] = bounding_radius(assets)
+        return actor
+
     def is_grasping(self, actor) -> torch.Tensor:
+        """ManiSkill's Panda grasp check (both fingers press on ``actor``, reference forces and angles). On the CPU
+        simulator, where each check scans every contact of the scene, an object built with ``build_graspable``
+        that is out of the fingers' reach in every env is not grasped without asking (the answer is the same)."""
+        radius = self._graspable_radius.get(actor.name)
+        if radius is not None and not self.gpu_sim_enabled:
+            distance = torch.linalg.norm(actor.pose.p - self.agent.tcp.pose.p, dim=-1)
+            if bool((distance > radius + FINGER_REACH).all()):
+                return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         return self.agent.is_grasping(actor, min_force=GRASP_MIN_FORCE)
 
     # ------------------------------------------------------------------ observations
@@ -358,7 +382,10 @@ class SpaceManipulationEnv(BaseEnv):
         super()._before_control_step()
         # measured once per control step, so that the CPU and GPU simulations (whose poses are fetched once per
         # control step) apply the same forces
-        self._pending_latch_forces = self._latch_forces()
+        forces = self._latch_forces()
+        if not self.gpu_sim_enabled:  # applied body by body on the CPU: leave out the latches that hold nothing
+            forces = [(actor, force) for actor, force in forces if bool(force.any())]
+        self._pending_latch_forces = forces
 
     def _before_simulation_step(self):
         super()._before_simulation_step()

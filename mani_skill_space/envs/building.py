@@ -146,6 +146,11 @@ def build_actor_per_env(
     return merged
 
 
+def bounding_radius(assets: Sequence[Asset]) -> float:
+    """The largest distance from an asset's origin to its collision geometry, over ``assets`` (m)."""
+    return max(float(np.linalg.norm(asset.collision_vertices, axis=1).max()) for asset in assets)
+
+
 def build_dynamic_per_env(scene: ManiSkillScene, assets: Sequence[Asset], name: str) -> Actor:
     """Per-env dynamic objects (``assets[i]`` in env ``i``) placed out of the way; ``_initialize_episode`` poses them."""
     return build_actor_per_env(scene, assets, name, body_type="dynamic", initial_pose=sapien.Pose(p=[0, 0, 2.0]))

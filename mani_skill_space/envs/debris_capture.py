@@ -5,7 +5,6 @@ from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv
-from mani_skill_space.envs.building import build_dynamic_per_env
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix, step_velocities
 from mani_skill_space.kwarg_checks import checked_number
 from mani_skill_space.procgen.asset import look_at
@@ -118,12 +117,10 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         else:
             assets = [load_dataset_object(DATASET_DEBRIS[seed % len(DATASET_DEBRIS)]) for seed in seeds]
         self.debris_assets = assets
-        self.debris = build_dynamic_per_env(self.scene, assets, "debris")
-        # free flight: no damping, and never asleep however slowly it drifts
+        self.debris = self.build_graspable(assets, "debris", never_sleep=True)
+        # free flight: no damping
         self.debris.linear_damping = 0.0
         self.debris.angular_damping = 0.0
-        for body in self.debris._bodies:
-            body.sleep_threshold = 0.0
         self._calm_steps = torch.zeros(self.num_envs, dtype=torch.int32, device=self.device)
         self._grasped = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         self._last_debris_pose = torch.zeros((self.num_envs, 7), device=self.device)

@@ -8,7 +8,7 @@ from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
-from mani_skill_space.envs.building import build_actor_per_env, build_dynamic_per_env
+from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     PEG_DROP_CLEARANCE,
     PegInsertion,
@@ -129,7 +129,8 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
             holes = [load_dataset_object("profile_socket")] * self.num_envs
         self.hole_module = build_actor_per_env(self.scene, holes, "hole_module", body_type="static", initial_pose=sapien.Pose(p=MODULE_POSITION))
         self.hole_assets = holes
-        self.peg = build_dynamic_per_env(self.scene, pegs, "peg")
+        # awake however slowly it drifts: a peg let go in orbit must drift out unless the socket's latch holds it
+        self.peg = self.build_graspable(pegs, "peg", never_sleep=True)
         self.peg_assets = pegs
         module = np.eye(4)
         module[:3, 3] = MODULE_POSITION

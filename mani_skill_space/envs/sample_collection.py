@@ -5,7 +5,6 @@ from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, turned_about_z
-from mani_skill_space.envs.building import build_dynamic_per_env
 from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover
 from mani_skill_space.procgen.rock import make_rock
@@ -75,7 +74,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
         else:
             assets = [load_dataset_object("sample_tube")] * self.num_envs
-        self.sample = build_dynamic_per_env(self.scene, assets, "sample")
+        self.sample = self.build_graspable(assets, "sample")
         # a tube lies flat: it never rests on its end caps
         self._placement = RestingPlacement(assets, self.device, exclude_axis=np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None)
         bin_frame = self.mount.frames["bin"]

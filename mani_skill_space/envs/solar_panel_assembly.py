@@ -9,7 +9,7 @@ from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
-from mani_skill_space.envs.building import build_actor_per_env, build_dynamic_per_env
+from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
     PEG_DROP_CLEARANCE,
@@ -183,8 +183,9 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
         self.socket_base = build_actor_per_env(self.scene, bases, "socket_base", body_type="static", initial_pose=target)
         self.socket_assets = bases
         self.peg_assets = pegs
-        self.pegs = [build_dynamic_per_env(self.scene, [p[i] for p in pegs], f"peg_{i}") for i in range(SOCKET_COUNT)]
-        self.panel = build_dynamic_per_env(self.scene, panels, "panel")
+        # awake however slowly they drift: a part let go in orbit must drift off unless a latch holds it
+        self.pegs = [self.build_graspable([p[i] for p in pegs], f"peg_{i}", never_sleep=True) for i in range(SOCKET_COUNT)]
+        self.panel = self.build_graspable(panels, "panel", never_sleep=True)
         self.panel_assets = panels
         self._store_task_geometry(pegs, bases, panels)
 
