@@ -397,15 +397,19 @@ def open_finger_corners(env) -> np.ndarray:
     return np.concatenate(corners)
 
 
-def lowest_point(actor) -> float:
-    """World height of the lowest vertex of an actor's (first env's) convex collision shapes."""
+def collision_vertices(actor) -> np.ndarray:
+    """World positions (k, 3) of the vertices of an actor's (first env's) convex collision shapes."""
     entity = actor._objs[0]
-    lowest = np.inf
+    points = []
     for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
         frame = (entity.pose * shape.get_local_pose()).to_transformation_matrix()
-        vertices = shape.get_vertices() * shape.get_scale()
-        lowest = min(lowest, float((vertices @ frame[:3, :3].T + frame[:3, 3])[:, 2].min()))
-    return lowest
+        points.append((shape.get_vertices() * shape.get_scale()) @ frame[:3, :3].T + frame[:3, 3])
+    return np.concatenate(points)
+
+
+def lowest_point(actor) -> float:
+    """World height of the lowest vertex of an actor's (first env's) convex collision shapes."""
+    return float(collision_vertices(actor)[:, 2].min())
 
 
 def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose:

@@ -22,13 +22,15 @@ from typing import Any, Callable, Generator, Iterator, Optional
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off, lowest_point, open_finger_corners
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off, collision_vertices, lowest_point, open_finger_corners
 
 PRE_GRASP_DISTANCE = 0.08
 PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
 FINGER_MARGIN = 0.006
+PAD_HALF_WIDTH = 0.01
+"""Half the width of a Panda finger pad (m) beside the peg it grips."""
 FINGER_PRESS_DEPTH = 0.004
 """The hand aims its open fingers at most this far (m) below the surface the peg lies on, so that they press on
 it lightly: aimed at a flat peg's axis, a tilted or rolled hand would drive a finger a centimetre into the
@@ -188,16 +190,20 @@ class PegInserter:
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
+        peg_points = collision_vertices(target.peg)
         for grasp in self._grasp_candidates(target, tip):
             with self._reaching():
                 lifted = self._grasp_and_lift_end(start, grasp)
             if lifted is None:
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
+            grip_half_width = np.abs(peg_points @ grasp.to_transformation_matrix()[:3, 1] - grasp.p @ grasp.to_transformation_matrix()[:3, 1]).max()
             hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             for twist in sorted(_twists(target.symmetry), key=score):
+                if not self._fingers_clear_surface(target, _along_axis(bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand), grip_half_width):
+                    continue
                 with self._reaching():
                     found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
                 if found is not None:
@@ -240,19 +246,42 @@ class PegInserter:
 
     def _grasp_candidates(self, target: PegTarget, tip: np.ndarray) -> Iterator[sapien.Pose]:
         """Hand poses taking the lying peg, most natural first: every grasp tilt, then the hand rolled about the
-        peg's axis, each also turned a half turn about its approach (the same grip, another wrist angle)."""
-        for roll in GRASP_ROLLS:
-            for tilt in GRASP_TILTS:
-                grasp = self._grasp_pose(target, tip, tilt, roll)
-                yield grasp
-                yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
+        peg's axis, each also turned a half turn about its approach (the same grip, another wrist angle); then
+        all of these again farther from the tip, where the hole is tilted (see ``_surface_rise``)."""
+        rise = self._surface_rise(target)
+        for extra_reach in (0.0, rise) if rise > FINGER_MARGIN else (0.0,):
+            for roll in GRASP_ROLLS:
+                for tilt in GRASP_TILTS:
+                    grasp = self._grasp_pose(target, tip, tilt, roll, extra_reach)
+                    yield grasp
+                    yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
 
-    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float, roll: float = 0.0) -> sapien.Pose:
+    @staticmethod
+    def _surface_rise(target: PegTarget) -> float:
+        """How far (m, along the hole's axis) the level surface round a tilted hole rises above its entrance beside
+        the peg, where the fingers holding it come down: the surface is not square to the axis."""
+        tilt = np.arccos(np.clip(target.bottom[2, 2], -1.0, 1.0))
+        return (target.radius + PAD_HALF_WIDTH) * np.tan(min(tilt, np.radians(60.0)))
+
+    def _fingers_clear_surface(self, target: PegTarget, hand_pressed: np.ndarray, grip_half_width: float) -> bool:
+        """Whether the fingers, closed on the peg (``grip_half_width`` either side of the TCP, across the closing
+        axis) by a hand at ``hand_pressed`` (the peg at the hole's bottom), stay above the level surface round the
+        hole's entrance."""
+        corners = self.finger_corners.copy()
+        inner = np.abs(corners[:, 1]).min()  # the open fingers' inner faces, across the closing (y) axis
+        corners[:, 1] -= np.sign(corners[:, 1]) * max(0.0, inner - grip_half_width)
+        lowest = (corners @ hand_pressed[:3, :3].T + hand_pressed[:3, 3])[:, 2].min()
+        bottom = target.bottom
+        entrance_height = bottom[2, 3] + target.depth * bottom[2, 2]
+        return bool(lowest >= entrance_height)
+
+    def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float, roll: float = 0.0, extra_reach: float = 0.0) -> sapien.Pose:
         """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip and rolled by ``roll``
-        about its axis, with the finger pads far enough from the tip to stay out of the hole."""
+        about its axis, with the finger pads far enough from the tip to stay out of the hole (and ``extra_reach``
+        farther)."""
         axis = tip[:3, 2]
         height, depth = target.height, target.depth
-        reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
+        reach = min(max(depth + PAD_REACH + FINGER_MARGIN + extra_reach, height / 2), height - HEAD_OVERHANG)
         closing = np.cross(axis, [0.0, 0.0, 1.0])
         closing /= np.linalg.norm(closing)
         upward = np.cross(closing, axis)
