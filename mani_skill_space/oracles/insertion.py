@@ -29,6 +29,8 @@ PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
 FINGER_MARGIN = 0.006
+SIDE_TOLERANCE = 0.001
+"""m: the peg's points within this of its farthest point across the fingers are where a finger meets it."""
 PAD_HALF_WIDTH = 0.01
 """Half the width of a Panda finger pad (m) beside the peg it grips."""
 FINGER_PRESS_DEPTH = 0.004
@@ -192,6 +194,8 @@ class PegInserter:
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
         for grasp in self._grasp_candidates(target, tip):
+            if not self._fingers_meet_sides(grasp, peg_points):
+                continue
             with self._reaching():
                 lifted = self._grasp_and_lift_end(start, grasp)
             if lifted is None:
@@ -209,6 +213,21 @@ class PegInserter:
                 if found is not None:
                     return grasp, float(twist)
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+
+    def _fingers_meet_sides(self, grasp: sapien.Pose, peg_points: np.ndarray) -> bool:
+        """Whether each finger, closing from ``grasp`` on the lying peg (its collision vertices ``peg_points``),
+        reaches down to where the peg sticks out farthest on its side: a hand rolled over a flat peg holds one
+        finger above it, and the grasp misses."""
+        hand = grasp.to_transformation_matrix()
+        across = (peg_points - grasp.p) @ hand[:3, 1]
+        corners = self.finger_corners @ hand[:3, :3].T + grasp.p
+        corner_side = (corners - grasp.p) @ hand[:3, 1]
+        for side in (1.0, -1.0):
+            outermost = side * across >= (side * across).max() - SIDE_TOLERANCE
+            contact_height = peg_points[outermost, 2].min()
+            if corners[side * corner_side > 0, 2].min() > contact_height + SIDE_TOLERANCE:
+                return False
+        return True
 
     def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail."""
