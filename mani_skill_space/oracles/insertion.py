@@ -193,8 +193,8 @@ class PegInserter:
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
-        for grasp in self._grasp_candidates(target, tip):
-            if not self._fingers_meet_sides(grasp, peg_points):
+        for grasp, checked in self._grasp_candidates(target, tip):
+            if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
             with self._reaching():
                 lifted = self._grasp_and_lift_end(start, grasp)
@@ -206,7 +206,8 @@ class PegInserter:
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             for twist in sorted(_twists(target.symmetry), key=score):
-                if not self._fingers_clear_surface(target, _along_axis(bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand), grip_half_width):
+                pressed = _along_axis(bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand)
+                if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
                 with self._reaching():
                     found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
@@ -263,17 +264,21 @@ class PegInserter:
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             return next((arm for arm in arms if self.oracle.screw_is_feasible(arm, pressed)), None)
 
-    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray) -> Iterator[sapien.Pose]:
+    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray) -> Iterator[tuple[sapien.Pose, bool]]:
         """Hand poses taking the lying peg, most natural first: every grasp tilt, then the hand rolled about the
         peg's axis, each also turned a half turn about its approach (the same grip, another wrist angle); then
-        all of these again farther from the tip, where the hole is tilted (see ``_surface_rise``)."""
+        all of these again farther from the tip, where the hole is tilted (see ``_surface_rise``). Each comes with
+        whether its fingers must be checked (``_fingers_meet_sides``, ``_fingers_clear_surface``): the last
+        resort, the first grasps again, is not (the checks are conservative: a grasp that fails them may still
+        get the peg 90% of the way in)."""
         rise = self._surface_rise(target)
-        for extra_reach in (0.0, rise) if rise > FINGER_MARGIN else (0.0,):
+        rounds = [(0.0, True), (rise, True), (0.0, False)] if rise > FINGER_MARGIN else [(0.0, True), (0.0, False)]
+        for extra_reach, checked in rounds:
             for roll in GRASP_ROLLS:
                 for tilt in GRASP_TILTS:
                     grasp = self._grasp_pose(target, tip, tilt, roll, extra_reach)
-                    yield grasp
-                    yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
+                    yield grasp, checked
+                    yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH), checked
 
     @staticmethod
     def _surface_rise(target: PegTarget) -> float:
