@@ -201,7 +201,7 @@ class PegInserter:
             if lifted is None:
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
-            grip_half_width = np.abs(peg_points @ grasp.to_transformation_matrix()[:3, 1] - grasp.p @ grasp.to_transformation_matrix()[:3, 1]).max()
+            grip_half_width = np.abs(_across_fingers(grasp, peg_points)).max()
             hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
@@ -219,10 +219,9 @@ class PegInserter:
         """Whether each finger, closing from ``grasp`` on the lying peg (its collision vertices ``peg_points``),
         reaches down to where the peg sticks out farthest on its side: a hand rolled over a flat peg holds one
         finger above it, and the grasp misses."""
-        hand = grasp.to_transformation_matrix()
-        across = (peg_points - grasp.p) @ hand[:3, 1]
-        corners = self.finger_corners @ hand[:3, :3].T + grasp.p
-        corner_side = (corners - grasp.p) @ hand[:3, 1]
+        across = _across_fingers(grasp, peg_points)
+        corners = self.finger_corners @ grasp.to_transformation_matrix()[:3, :3].T + grasp.p
+        corner_side = _across_fingers(grasp, corners)
         for side in (1.0, -1.0):
             outermost = side * across >= (side * across).max() - SIDE_TOLERANCE
             contact_height = peg_points[outermost, 2].min()
@@ -341,6 +340,11 @@ def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
     lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
     near_entrance = along > target.depth - KEEPOUT_BELOW_ENTRANCE
     return points[(lateral > target.radius + AXIS_KEEPOUT) | ~near_entrance]
+
+
+def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
+    """Where ``points`` (k, 3, world) lie along the hand's closing (y) axis, from its TCP."""
+    return (points - hand.p) @ hand.to_transformation_matrix()[:3, 1]
 
 
 def _twists(order: int) -> np.ndarray:
