@@ -5,10 +5,11 @@
 
 The flags mirror ManiSkill's ``mani_skill.examples.motionplanning.panda.run``, plus ``--env-kwargs`` (a JSON
 object: domain, asset_source, ...) and ``--seed-start``. Output: ``<record-dir>/<env-id>/motionplanning/
-<traj-name>.h5`` and ``.json``, written by ManiSkill's ``RecordEpisode`` (actions in ``pd_joint_pos``, env states,
-per-step success; the JSON carries the env kwargs and each episode's seed). Convert them to another control
-mode or observation mode with ``python -m mani_skill_space.replay`` (ManiSkill's replay tool with our envs
-registered), e.g. ``-c pd_ee_delta_pose -o state --save-traj``.
+<traj-name>.h5`` and ``.json``, written by ManiSkill's ``RecordEpisode`` (actions in ``--control-mode``: ``pd_joint_pos``
+by default, or ``pd_ee_delta_pose``, in which the oracle acts directly; env states, per-step success; the JSON
+carries the env kwargs and each episode's seed). Convert them to another control mode or observation mode with
+``python -m mani_skill_space.replay`` (ManiSkill's replay tool with our envs registered), e.g.
+``-c pd_ee_delta_pose -o state --save-traj``.
 
 With several processes, process i takes seeds seed_start + i, seed_start + i + procs, ... (disjoint), and
 the per-process files are merged with ManiSkill's ``merge_trajectories``.
@@ -36,7 +37,7 @@ from tqdm import tqdm
 
 from mani_skill_space.cli_support import check_at_least, checking_inputs, parse_json_object, run_cli, tyro_parser
 from mani_skill_space.envs import task_class
-from mani_skill_space.oracles import ORACLES, oracle_for
+from mani_skill_space.oracles import ORACLE_CONTROL_MODES, ORACLES, oracle_for
 from mani_skill_space.rollout import run_episode
 from mani_skill_space.suites import check_env_kwargs
 
@@ -57,6 +58,9 @@ SET_BY_THE_GENERATOR = (
 class Args:
     env_id: Annotated[str, tyro.conf.arg(aliases=["-e"])] = "SampleCollection-v1"
     """Env to solve; oracles exist for the ids in ``mani_skill_space.oracles.ORACLES``."""
+    control_mode: Annotated[str, tyro.conf.arg(aliases=["-c"])] = "pd_joint_pos"
+    """Control mode the oracle acts and is recorded in: pd_joint_pos (its joint targets; convert them with replay)
+    or pd_ee_delta_pose (the default control mode, recorded natively: no conversion)."""
     obs_mode: Annotated[str, tyro.conf.arg(aliases=["-o"])] = "none"
     """Observations to store; usually none (replay the demos later to get any observation mode)."""
     num_traj: Annotated[int, tyro.conf.arg(aliases=["-n"])] = 10
@@ -89,7 +93,7 @@ class Outcome:
 def generate(args: Args, proc_id: int = 0) -> Outcome:
     import mani_skill_space  # noqa: F401  (registers the envs in a spawned worker)
 
-    oracle = oracle_for(args.env_id)
+    oracle = oracle_for(args.env_id, args.control_mode)
     kwargs = json.loads(args.env_kwargs)
     env = gym.make(
         args.env_id,
@@ -140,6 +144,8 @@ def check_args(args: Args) -> None:
     JSON object or that the env rejects (names and values), a count below 1."""
     if args.env_id not in ORACLES:
         raise ValueError(f"no oracle for env id {args.env_id!r}; valid choices: {', '.join(ORACLES)}")
+    if args.control_mode not in ORACLE_CONTROL_MODES:
+        raise ValueError(f"unknown --control-mode {args.control_mode!r}; valid choices: {', '.join(ORACLE_CONTROL_MODES)}")
     check_at_least("--num-traj", args.num_traj, 1)
     check_at_least("--num-procs", args.num_procs, 1)
     check_at_least("--seed-start", args.seed_start, 0)

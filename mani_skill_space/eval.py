@@ -9,7 +9,8 @@ mode, ``normalized_dense`` unless the suite says otherwise) and the mean episode
 success, or the whole episode). Results go to ``results.json`` and ``results.md`` in the output folder; the
 table is also printed. The same suite and policies give the same numbers.
 
-Policies: ``random``, ``zero``, ``oracle`` (the motion-planning solution of each task) or ``module:callable``
+Policies: ``random``, ``zero``, ``oracle`` (the motion-planning solution of each task), ``oracle-ee`` (the same
+acting in ``pd_ee_delta_pose``) or ``module:callable``
 (see ``mani_skill_space.policies``). A policy with a ``control_mode`` gets its env made in that mode.
 
 The suite (its env ids and kwargs), the policies and the counts are checked before any worker starts; a bad one is
@@ -45,7 +46,7 @@ class Args:
     suite: Path
     """A suite: the name of a shipped suite (e.g. smoke) or the path of a .toml file."""
     policy: tuple[str, ...] = ("oracle",)
-    """One or more policies: random, zero, oracle, checkpoint:PATH or module:callable."""
+    """One or more policies: random, zero, oracle, oracle-ee, checkpoint:PATH or module:callable."""
     output_dir: Path = Path("outputs/eval")
     num_workers: int = os.cpu_count() or 1
     video: int = 0
@@ -128,7 +129,7 @@ def check_args(args: Args) -> Suite:
     check_at_least("--video", args.video, 0)
     check_at_least("--episodes", args.episodes, 1)
     if not args.policy:
-        raise ValueError("--policy needs at least one policy: random, zero, oracle, checkpoint:PATH or module:callable")
+        raise ValueError("--policy needs at least one policy: random, zero, oracle, oracle-ee, checkpoint:PATH or module:callable")
     suite = load_suite(args.suite)
     for policy in args.policy:
         check_policy(policy)

@@ -1,6 +1,7 @@
 """The built-in policies and ``load_policy`` (see ``mani_skill_space.policy`` for the protocol).
 
-``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle``, ``checkpoint:PATH`` (a
+``load_policy(spec)`` turns a CLI spec into a policy: ``random``, ``zero``, ``oracle`` (acting in
+``pd_joint_pos``), ``oracle-ee`` (the same oracle acting in ``pd_ee_delta_pose``), ``checkpoint:PATH`` (a
 baseline trained by ``baselines/*.py``, see ``mani_skill_space.learning``) or ``module:callable``, where
 ``callable`` is a zero-argument factory returning such an object.
 """
@@ -14,7 +15,7 @@ import numpy as np
 
 from mani_skill_space.policy import Policy
 
-BUILTIN_POLICIES = ("random", "zero", "oracle")
+BUILTIN_POLICIES = ("random", "zero", "oracle", "oracle-ee")
 
 
 class RandomPolicy(Policy):
@@ -39,14 +40,17 @@ class ZeroPolicy(Policy):
 
 
 class OraclePolicy(Policy):
-    """Dispatches to the motion-planning oracle of whichever env it is reset on."""
+    """Dispatches to the motion-planning oracle of whichever env it is reset on, acting in ``control_mode``
+    (``pd_joint_pos``, or ``pd_ee_delta_pose``: see ``mani_skill_space.oracles.end_effector``)."""
 
-    control_mode = "pd_joint_pos"
+    def __init__(self, control_mode: str = "pd_joint_pos"):
+        self.control_mode = control_mode
 
     def reset(self, env, seed: int) -> None:
         from mani_skill_space.oracles import oracle_for
 
-        self.oracle = oracle_for(env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__)
+        env_id = env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__
+        self.oracle = oracle_for(env_id, self.control_mode)
         self.oracle.reset(env, seed)
 
     def act(self, obs) -> np.ndarray:
@@ -62,7 +66,12 @@ class OraclePolicy(Policy):
 
 
 def load_policy(spec: str) -> Policy:
-    builtins: dict[str, Callable[[], Any]] = {"random": RandomPolicy, "zero": ZeroPolicy, "oracle": OraclePolicy}
+    builtins: dict[str, Callable[[], Any]] = {
+        "random": RandomPolicy,
+        "zero": ZeroPolicy,
+        "oracle": OraclePolicy,
+        "oracle-ee": lambda: OraclePolicy("pd_ee_delta_pose"),
+    }
     if spec in builtins:
         return builtins[spec]()
     if spec.startswith("checkpoint:"):

@@ -71,3 +71,23 @@ def test_maniskill_replay_converts_demos_to_ee_delta_pose_and_the_dataset_loads_
     assert all(success.any() for success in successes)
     first_successes = [int(np.argmax(success)) for success in successes]
     assert max(first_successes) < limit, first_successes
+
+
+def test_demos_are_recorded_natively_in_ee_delta_pose_and_replay_to_success(tmp_path):
+    args = demos.Args(env_id="PegInHoleAssembly-v1", control_mode="pd_ee_delta_pose", num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name="ee", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=6000)
+    outcome = demos.main(args)
+    meta = json.loads(open(outcome.path.replace(".h5", ".json")).read())
+    assert meta["env_info"]["env_kwargs"]["control_mode"] == "pd_ee_delta_pose"
+    episode = meta["episodes"][0]
+    kwargs = {k: v for k, v in meta["env_info"]["env_kwargs"].items() if k not in ("render_mode",)}
+    env = gym.make(meta["env_info"]["env_id"], **kwargs, render_backend="none")
+    env.reset(**episode["reset_kwargs"])
+    with h5py.File(outcome.path) as trajectories:
+        actions = trajectories["traj_0"]["actions"][:]
+        recorded_success = trajectories["traj_0"]["success"][:]
+    assert actions.shape[1] == 7 and np.abs(actions).max() <= 1.0  # normalised end-effector deltas and the gripper
+    assert recorded_success[-1] and len(actions) < gym.spec("PegInHoleAssembly-v1").max_episode_steps
+    for action in actions:
+        *_, info = env.step(action)
+    assert bool(info["success"])  # the actions alone reproduce the demonstration
+    env.close()

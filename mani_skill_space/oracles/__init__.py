@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Union
+
 from mani_skill_space.oracles.base import Oracle, PlanningFailed
 from mani_skill_space.oracles.debris_capture import DebrisCaptureOracle
+from mani_skill_space.oracles.end_effector import CONTROL_MODE, EndEffectorDeltaPose
 from mani_skill_space.oracles.peg_in_hole import PegInHoleOracle
 from mani_skill_space.oracles.sample_collection import SampleCollectionOracle
 from mani_skill_space.oracles.solar_panel import SolarPanelOracle
@@ -16,10 +19,18 @@ ORACLES: dict[str, type[Oracle]] = {
 }
 
 
-def oracle_for(env_id: str) -> Oracle:
+ORACLE_CONTROL_MODES = ("pd_joint_pos", CONTROL_MODE)
+"""The control modes an oracle acts in: its own joint targets, or the end-effector deltas that reach them."""
+
+
+def oracle_for(env_id: str, control_mode: str = "pd_joint_pos") -> Union[Oracle, EndEffectorDeltaPose]:
+    """The oracle of ``env_id``, acting in ``control_mode``."""
     if env_id not in ORACLES:
         raise ValueError(f"No oracle for {env_id!r}; oracles exist for: {', '.join(ORACLES)}")
-    return ORACLES[env_id]()
+    if control_mode not in ORACLE_CONTROL_MODES:
+        raise ValueError(f"the oracles act in no control mode {control_mode!r}; valid choices: {', '.join(ORACLE_CONTROL_MODES)}")
+    oracle = ORACLES[env_id]()
+    return oracle if control_mode == "pd_joint_pos" else EndEffectorDeltaPose(oracle)
 
 
-__all__ = ["ORACLES", "Oracle", "PlanningFailed", "oracle_for"]
+__all__ = ["ORACLES", "ORACLE_CONTROL_MODES", "EndEffectorDeltaPose", "Oracle", "PlanningFailed", "oracle_for"]

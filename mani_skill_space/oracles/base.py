@@ -47,6 +47,10 @@ class Oracle(Policy):
     """(metres, radians): where set, every motion is retimed to move the TCP target this far per control step (or
     turn it this far, whichever comes first), a pace ``pd_ee_delta_pose`` (0.1 m / 0.1 rad per step, less its PD
     lag) follows step for step: the demonstrations then convert to it without stretching."""
+    tcp_speed_limit: Optional[tuple[float, float]] = None
+    """(metres, radians): where set (and no ``tcp_pace``), a motion whose TCP would move or turn farther than this in
+    a control step is slowed there to this (and nowhere else): the end-effector controller clips each step's delta
+    to its own limits, so an oracle acting through it plans within them (``oracles.end_effector`` sets it)."""
     path_check_step: Optional[float] = None
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
@@ -236,9 +240,10 @@ class Oracle(Policy):
         """About how many control steps a TCP path takes at ``tcp_pace``."""
         return float(self._paces(positions, rotations).sum())
 
-    def _paces(self, positions: np.ndarray, rotations: list[Rotation]) -> np.ndarray:
-        """Each segment of a TCP path in steps at ``tcp_pace`` (its move or its turn, whichever is further)."""
-        metres, radians = self.tcp_pace
+    def _paces(self, positions: np.ndarray, rotations: list[Rotation], pace: Optional[tuple[float, float]] = None) -> np.ndarray:
+        """Each segment of a TCP path in steps at ``pace`` (``tcp_pace`` by default; its move or its turn, whichever
+        is further)."""
+        metres, radians = pace or self.tcp_pace
         moves = np.linalg.norm(np.diff(positions, axis=0), axis=1) / metres
         turns = np.array([(a.inv() * b).magnitude() for a, b in zip(rotations, rotations[1:])]) / radians
         return np.maximum(moves, turns)
@@ -305,10 +310,30 @@ class Oracle(Policy):
             yield np.hstack([arm, self.gripper]).astype(np.float32)
 
     def _follow(self, positions: np.ndarray, retime: bool = True) -> Iterator[np.ndarray]:
-        if retime and self.tcp_pace is not None:
-            positions = self._retimed_to_tcp_pace(positions)
+        if retime:
+            positions = self.paced(positions)
         for qpos in positions:
             yield np.hstack([qpos, self.gripper]).astype(np.float32)
+
+    def paced(self, positions: np.ndarray) -> np.ndarray:
+        """``positions`` (a joint path from the arm's joints now, one target per control step) as the oracle sends
+        them: retimed to ``tcp_pace`` where set, else slowed where the TCP would outrun ``tcp_speed_limit``."""
+        if self.tcp_pace is not None:
+            return self._retimed_to_tcp_pace(positions)
+        if self.tcp_speed_limit is not None:
+            return self._slowed_to_speed_limit(positions)
+        return positions
+
+    def _slowed_to_speed_limit(self, positions: np.ndarray) -> np.ndarray:
+        """``positions`` resampled along the same path with every step that would move the TCP farther than
+        ``tcp_speed_limit`` stretched to as many steps as the limit needs (the other steps keep their timing)."""
+        path = np.concatenate([self.arm_qpos()[None], positions])
+        durations = np.maximum(1.0, self._paces(*self._tcp_poses(path), pace=self.tcp_speed_limit))
+        times = np.concatenate([[0.0], np.cumsum(durations)])
+        if times[-1] <= len(positions) + 1e-9:  # nothing to slow
+            return positions
+        steps = np.linspace(0.0, times[-1], int(np.ceil(times[-1] - 1e-9)) + 1)[1:]
+        return np.stack([np.interp(steps, times, path[:, joint]) for joint in range(path.shape[1])], axis=1)
 
     def _retimed_to_tcp_pace(self, positions: np.ndarray) -> np.ndarray:
         """``positions`` (a joint path, one target per control step) resampled along the same path so that the TCP

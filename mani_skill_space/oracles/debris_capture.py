@@ -125,7 +125,7 @@ class DebrisCaptureOracle(Oracle):
             for tilt in TILTS:
                 pose = _facing(point, velocity + gravity * t, self._long_axis(env, t), tilt)
                 for arm in self.ik_solutions(pose):
-                    path = self._timed_path(start, arm)
+                    path = self.paced(self._timed_path(start, arm))
                     if len(path) * env.control_timestep + ARRIVAL_MARGIN > t or not self.path_is_free(start, arm):
                         continue
                     if self._clear_of_debris(env, path, point, t):

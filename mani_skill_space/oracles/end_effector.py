@@ -1,0 +1,110 @@
+"""The oracles acting in ``pd_ee_delta_pose`` (ManiSkill's default Panda controller, and ours), so that their
+demonstrations are recorded natively in the control mode learners use, with no conversion afterwards.
+
+An oracle plans joint targets. At every control step ``EndEffectorDeltaPose`` takes the oracle's joint target,
+computes the TCP pose it puts the hand in (forward kinematics on the robot's own model) and sends the end-effector
+delta that moves the TCP from where it is now to that pose. The controller adds the delta to the TCP's current pose
+and solves IK from the current joints, so its joint target is the oracle's (up to the arm's redundancy), the loop is
+closed at every step and nothing is stretched in time: a timed motion such as a debris capture keeps its timing,
+which ManiSkill's conversion of recorded joint actions (extra steps where the delta would be clipped) cannot.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import torch
+from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
+from mani_skill.utils.geometry.rotation_conversions import matrix_to_euler_angles, quaternion_to_matrix
+
+from mani_skill_space.oracles.base import Oracle
+from mani_skill_space.policy import Policy
+
+CONTROL_MODE = "pd_ee_delta_pose"
+DELTA_FRAME = "root_translation:root_aligned_body_rotation"
+SPEED_FRACTION = 1.0 / 3.0
+"""Share of the controller's per-step limits the oracle's TCP may move or turn in a step. The delta sent is the
+step's motion plus the arm's lag behind its previous target, and the Panda's joint drives (stiffness 1000, damping
+100) lag 0.1 s, two control steps, behind a target moving at a steady speed: step and lag fit within the limits
+together at a third of them. (At half of them the wrist fell further behind at every clipped step of a fast turn.)"""
+
+
+class EndEffectorDeltaPose(Policy):
+    """``oracle`` acting in ``pd_ee_delta_pose`` (see the module docstring)."""
+
+    control_mode = CONTROL_MODE
+
+    def __init__(self, oracle: Oracle):
+        self.oracle = oracle
+
+    def reset(self, env, seed: int) -> None:
+        self.controller = arm_delta_controller(env.unwrapped)
+        self.model = self.controller.articulation.create_pinocchio_model()
+        self.oracle.tcp_speed_limit = speed_limit(self.controller)
+        self.oracle.reset(env, seed)
+
+    def act(self, obs) -> np.ndarray:
+        joint_action = self.oracle.act(obs)
+        arm_target, gripper = joint_action[:-1], joint_action[-1:]
+        arm_action = delta_action_to(self.controller, self.tcp_pose_at_base(arm_target))
+        return np.concatenate([arm_action, gripper]).astype(np.float32)
+
+    def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm
+        joints at ``arm_qpos`` and the other joints (the fingers) where they are."""
+        qpos = self.controller.articulation.get_qpos()[0].cpu().numpy().copy()
+        qpos[self.controller.active_joint_indices.cpu().numpy()] = arm_qpos
+        self.model.compute_forward_kinematics(qpos)
+        pose = self.model.get_link_pose(self.controller.ee_link.index)
+        return np.asarray(pose.p), np.asarray(pose.q)
+
+    @property
+    def done(self) -> bool:
+        return self.oracle.done
+
+    @property
+    def failure(self) -> Optional[str]:
+        return self.oracle.failure
+
+
+def arm_delta_controller(env) -> PDEEPoseController:
+    """The env's arm controller, checked to be the delta end-effector pose controller this adapter speaks to."""
+    arm = env.agent.controller.controllers.get("arm")
+    config = getattr(arm, "config", None)
+    if not isinstance(arm, PDEEPoseController) or config.frame != DELTA_FRAME or not config.use_delta or config.use_target:
+        raise ValueError(f"the oracle acts in {CONTROL_MODE} ({DELTA_FRAME}, delta from the current pose); the env's arm controller is {arm!r}")
+    if not config.normalize_action:
+        raise ValueError(f"the oracle acts in {CONTROL_MODE} with normalised actions; the env's arm controller does not normalise them")
+    return arm
+
+
+def speed_limit(controller: PDEEPoseController) -> tuple[float, float]:
+    """(metres, radians) per control step the oracle's TCP may move and turn: ``SPEED_FRACTION`` of the most the
+    controller moves (its smallest position bound) and turns (its rotation bound) in a step."""
+    low, high = controller.action_space_low.cpu().numpy(), controller.action_space_high.cpu().numpy()
+    metres = float(np.minimum(-low[:3], high[:3]).min())
+    radians = float(np.abs(np.asarray(controller.config.rot_lower)).min())
+    return SPEED_FRACTION * metres, SPEED_FRACTION * radians
+
+
+def delta_action_to(controller: PDEEPoseController, target: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The normalised ``pd_ee_delta_pose`` arm action that takes the end effector from its pose now to ``target``
+    ((position, wxyz quaternion) in the base frame): the inverse of the controller's ``compute_target_pose``
+    (translation in the base frame, rotation applied on the left in base-aligned axes as XYZ Euler angles) and of its
+    scaling. A move beyond the controller's per-step limits is clipped to them the way the controller clips
+    (position per axis, rotation by norm); the next step goes on from wherever this one got to."""
+    now = controller.ee_pose_at_base
+    position, quaternion = target
+    delta_position = position - now.p[0].cpu().numpy()
+    rotation_now = quaternion_to_matrix(now.q[0].cpu().double())
+    rotation_target = quaternion_to_matrix(torch.as_tensor(quaternion, dtype=torch.float64))
+    delta_rotation = matrix_to_euler_angles(rotation_target @ rotation_now.T, "XYZ").numpy()
+
+    low, high = controller.action_space_low.cpu().numpy(), controller.action_space_high.cpu().numpy()
+    position_action = np.clip((delta_position - (high[:3] + low[:3]) / 2) / ((high[:3] - low[:3]) / 2), -1.0, 1.0)
+    rotation_action = delta_rotation / np.asarray(controller.config.rot_lower, dtype=np.float64)
+    norm = np.linalg.norm(rotation_action)
+    if norm > 1.0:
+        rotation_action = rotation_action / norm
+    return np.concatenate([position_action, rotation_action])

@@ -1,0 +1,106 @@
+"""The oracles acting in pd_ee_delta_pose: the delta they send is the controller's own target, their motions fit
+its per-step limits, and they solve a seed of every task in that mode (physx_cpu, deterministic)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+import mani_skill_space  # noqa: F401
+from mani_skill_space.oracles import oracle_for
+from mani_skill_space.oracles.end_effector import EndEffectorDeltaPose, arm_delta_controller, delta_action_to, speed_limit
+from mani_skill_space.rollout import run_episode
+
+
+@pytest.fixture(scope="module")
+def ee_env():
+    env = gym.make("PegInHoleAssembly-v1", control_mode="pd_ee_delta_pose", render_backend="none")
+    env.reset(seed=0)
+    yield env
+    env.close()
+
+
+def _controller_target(controller, action):
+    """Where the controller puts its end-effector target for ``action`` (its own code path)."""
+    processed = controller._preprocess_action(torch.as_tensor(np.asarray(action)[None], dtype=torch.float32))
+    target = controller.compute_target_pose(controller.ee_pose_at_base, processed)
+    return target.p[0].numpy(), Rotation.from_quat(np.roll(target.q[0].numpy(), -1))
+
+
+def _offset_target(controller, move, turn):
+    now = controller.ee_pose_at_base
+    rotation = Rotation.from_rotvec(turn) * Rotation.from_quat(np.roll(now.q[0].numpy().astype(np.float64), -1))
+    return now.p[0].numpy().astype(np.float64) + np.asarray(move), rotation
+
+
+@pytest.mark.parametrize("move, turn", [([0.02, -0.01, 0.03], [0.05, 0.0, 0.0]), ([0.0, 0.04, -0.02], [0.03, -0.04, 0.02]), ([0.0, 0.0, 0.0], [0.0, 0.0, -0.09])])
+def test_the_delta_sent_is_the_controllers_target(ee_env, move, turn):
+    controller = arm_delta_controller(ee_env.unwrapped)
+    position, rotation = _offset_target(controller, move, turn)
+    action = delta_action_to(controller, (position, np.roll(rotation.as_quat(), 1)))
+    reached_position, reached_rotation = _controller_target(controller, action)
+    np.testing.assert_allclose(reached_position, position, atol=1e-6)
+    assert (reached_rotation * rotation.inv()).magnitude() < 1e-5
+
+
+def test_a_target_beyond_the_limits_is_clipped_as_the_controller_clips(ee_env):
+    controller = arm_delta_controller(ee_env.unwrapped)
+    position, rotation = _offset_target(controller, [0.3, 0.0, -0.05], [0.0, 0.5, 0.0])
+    action = delta_action_to(controller, (position, np.roll(rotation.as_quat(), 1)))
+    np.testing.assert_allclose(action[:3], [1.0, 0.0, -0.5], atol=1e-6)
+    assert np.linalg.norm(action[3:]) == pytest.approx(1.0)
+    reached_position, reached_rotation = _controller_target(controller, action)
+    now = controller.ee_pose_at_base.p[0].numpy()
+    np.testing.assert_allclose(reached_position - now, [0.1, 0.0, -0.05], atol=1e-6)
+    assert (reached_rotation * Rotation.from_quat(np.roll(controller.ee_pose_at_base.q[0].numpy(), -1)).inv()).magnitude() == pytest.approx(0.1, abs=1e-5)
+
+
+def test_the_oracle_refuses_an_env_in_another_control_mode():
+    env = gym.make("PegInHoleAssembly-v1", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="pd_ee_delta_pose"):
+        EndEffectorDeltaPose(oracle_for("PegInHoleAssembly-v1")).reset(env, 0)
+    env.close()
+
+
+def test_an_unknown_control_mode_names_the_valid_ones():
+    with pytest.raises(ValueError, match="pd_joint_pos, pd_ee_delta_pose"):
+        oracle_for("PegInHoleAssembly-v1", "pd_joint_delta_pos")
+
+
+def test_fast_motions_are_slowed_to_the_speed_limit_and_slow_ones_kept(ee_env):
+    oracle = oracle_for("PegInHoleAssembly-v1")
+    oracle.reset(ee_env, 0)
+    oracle.make_solver(ee_env.unwrapped)
+    oracle.tcp_speed_limit = speed_limit(arm_delta_controller(ee_env.unwrapped))
+    start = oracle.arm_qpos()
+    goal = start + np.array([0.8, -0.4, 0.3, 0.5, -0.6, 0.4, 1.0])
+    fast = oracle._timed_path(start, goal)
+    slowed = oracle.paced(fast)
+    assert len(slowed) > len(fast)
+    np.testing.assert_allclose(slowed[-1], goal, atol=1e-9)
+    positions, rotations = oracle._tcp_poses(np.concatenate([start[None], slowed]))
+    metres, radians = oracle.tcp_speed_limit
+    assert np.linalg.norm(np.diff(positions, axis=0), axis=1).max() <= metres * 1.001
+    assert max((a.inv() * b).magnitude() for a, b in zip(rotations, rotations[1:])) <= radians * 1.001
+    slow = start + np.linspace(0.0, 1.0, 40)[1:, None] * np.full(7, 0.01)
+    np.testing.assert_array_equal(oracle.paced(slow), slow)
+
+
+@pytest.mark.parametrize(
+    "env_id, domain, asset_source, seed",
+    [
+        ("SampleCollection-v1", "mars", "dataset", 6000),
+        ("SampleCollection-v1", "mars", "procedural", 6000),
+        ("PegInHoleAssembly-v1", "moon", "dataset", 6000),
+        ("PegInHoleAssembly-v1", "moon", "procedural", 6001),
+        ("DebrisCapture-v1", "orbit", "dataset", 6000),
+        ("DebrisCapture-v1", "orbit", "procedural", 6000),
+    ],
+)
+def test_the_oracle_solves_every_task_in_ee_delta_pose(env_id, domain, asset_source, seed):
+    env = gym.make(env_id, domain=domain, asset_source=asset_source, control_mode="pd_ee_delta_pose", render_backend="none")
+    result = run_episode(env, oracle_for(env_id, "pd_ee_delta_pose"), seed)
+    assert result.success_once and result.success_at_end, (env_id, domain, asset_source, seed, result.failure)
+    env.close()
