@@ -3,6 +3,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+import sapien
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
@@ -95,4 +96,20 @@ def test_insertion_grasps_keep_both_fingers_on_a_flat_peg():
     rolled = inserter._grasp_pose(target, tip, GRASP_TILTS[0], roll=np.radians(25.0))
     assert inserter._fingers_meet_sides(level, points)
     assert not inserter._fingers_meet_sides(rolled, points)
+    env.close()
+
+
+def test_of_two_alike_grasps_the_one_the_hand_turns_less_to_reach_comes_first():
+    env = gym.make("PegInHoleAssembly-v1", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=0)
+    oracle = oracle_for("PegInHoleAssembly-v1")
+    oracle.reset(env, 0)
+    hand = oracle.tcp_pose()
+    closing_now = hand.to_transformation_matrix()[:3, 1]
+    tilted = hand * sapien.Pose(q=[np.cos(0.2), np.sin(0.2), 0.0, 0.0])  # 23 degrees about the TCP's x axis
+    for pose in (tilted, tilted * sapien.Pose(q=[0.0, 0.0, 0.0, 1.0])):
+        first, second = oracle.closings_nearest_first(pose)
+        assert first.to_transformation_matrix()[:3, 1] @ closing_now > 0.9
+        np.testing.assert_allclose(second.to_transformation_matrix()[:3, 1], -first.to_transformation_matrix()[:3, 1], atol=1e-9)
+        np.testing.assert_allclose(first.to_transformation_matrix()[:3, 2], pose.to_transformation_matrix()[:3, 2], atol=1e-9)
     env.close()

@@ -94,15 +94,7 @@ class DebrisCaptureOracle(Oracle):
         """The meeting orientation turned about its approach axis so the fingers close across ``long_axis``,
         whichever of the two such closing directions is nearer the hand's present one."""
         frame = meeting.to_transformation_matrix()
-        return self._nearer_closing(_facing(frame[:3, 3], -frame[:3, 2], long_axis)).q
-
-    def _nearer_closing(self, pose: sapien.Pose) -> sapien.Pose:
-        """``pose`` or, if its fingers close the other way round from the hand's present ones, the same grasp
-        half a turn about its approach axis (the fingers are alike): the hand turns less to get there."""
-        closing = pose.to_transformation_matrix()[:3, 1]
-        if closing @ self.env.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].cpu().numpy() < 0:
-            return pose * sapien.Pose(q=[0.0, 0.0, 0.0, 1.0])
-        return pose
+        return self.closings_nearest_first(_facing(frame[:3, 3], -frame[:3, 2], long_axis))[0].q
 
     def _brake(self, env) -> Iterator[np.ndarray]:
         """Keep the hand moving with the held debris, slowing linearly to a stop."""
@@ -127,15 +119,15 @@ class DebrisCaptureOracle(Oracle):
             if point[2] < LOWEST_MEETING_HEIGHT or not REACH[0] <= np.linalg.norm(point - shoulder) <= REACH[1]:
                 continue
             for tilt in TILTS:
-                pose = self._nearer_closing(_facing(point, velocity + gravity * t, self._long_axis(env, t), tilt))
-                for arm in self.ik_solutions(pose):
-                    path = self.paced(self._timed_path(start, arm))
-                    if len(path) * env.control_timestep + ARRIVAL_MARGIN > t or not self.path_is_free(start, arm):
-                        continue
-                    if self._clear_of_debris(env, path, point, t):
-                        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
-                        self._tilt = tilt
-                        return pose, arm
+                for pose in self.closings_nearest_first(_facing(point, velocity + gravity * t, self._long_axis(env, t), tilt)):
+                    for arm in self.ik_solutions(pose):
+                        path = self.paced(self._timed_path(start, arm))
+                        if len(path) * env.control_timestep + ARRIVAL_MARGIN > t or not self.path_is_free(start, arm):
+                            continue
+                        if self._clear_of_debris(env, path, point, t):
+                            self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
+                            self._tilt = tilt
+                            return pose, arm
         self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
         raise PlanningFailed("the debris never passes where the hand can meet it in time")
 
