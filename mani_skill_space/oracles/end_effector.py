@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 import torch
 from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
+from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.geometry.rotation_conversions import matrix_to_euler_angles, quaternion_to_matrix
 
 from mani_skill_space.oracles.base import Oracle
@@ -102,7 +103,7 @@ def delta_action_to(controller: PDEEPoseController, target: tuple[np.ndarray, np
     delta_rotation = matrix_to_euler_angles(rotation_target @ rotation_now.T, "XYZ").numpy()
 
     low, high = controller.action_space_low.cpu().numpy(), controller.action_space_high.cpu().numpy()
-    position_action = np.clip((delta_position - (high[:3] + low[:3]) / 2) / ((high[:3] - low[:3]) / 2), -1.0, 1.0)
+    position_action = np.clip(inv_scale_action(delta_position, low[:3], high[:3]), -1.0, 1.0)
     rotation_action = delta_rotation / np.asarray(controller.config.rot_lower, dtype=np.float64)
     norm = np.linalg.norm(rotation_action)
     if norm > 1.0:
