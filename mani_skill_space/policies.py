@@ -9,11 +9,11 @@ baseline trained by ``baselines/*.py``, see ``mani_skill_space.learning``) or ``
 from __future__ import annotations
 
 import importlib
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 import numpy as np
 
-from mani_skill_space.policy import Policy
+from mani_skill_space.policy import Policy, WrapsOracle
 
 BUILTIN_POLICIES = ("random", "zero", "oracle", "oracle-ee")
 
@@ -39,7 +39,7 @@ class ZeroPolicy(Policy):
         return self.action
 
 
-class OraclePolicy(Policy):
+class OraclePolicy(WrapsOracle):
     """Dispatches to the motion-planning oracle of whichever env it is reset on, acting in ``control_mode``
     (``pd_joint_pos``, or ``pd_ee_delta_pose``: see ``mani_skill_space.oracles.end_effector``)."""
 
@@ -55,14 +55,6 @@ class OraclePolicy(Policy):
 
     def act(self, obs) -> np.ndarray:
         return self.oracle.act(obs)
-
-    @property
-    def done(self) -> bool:
-        return self.oracle.done
-
-    @property
-    def failure(self) -> Optional[str]:
-        return self.oracle.failure
 
 
 def load_policy(spec: str) -> Policy:

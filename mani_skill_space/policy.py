@@ -23,3 +23,18 @@ class Policy:
 
     def act(self, obs) -> np.ndarray:
         raise NotImplementedError
+
+
+class WrapsOracle(Policy):
+    """A policy that acts through ``self.oracle``, a scripted policy, and reports its ``done`` and ``failure`` (the
+    runners read them: a demonstration ends when the oracle is done, and its failure is recorded)."""
+
+    oracle: Policy
+
+    @property
+    def done(self) -> bool:
+        return self.oracle.done
+
+    @property
+    def failure(self) -> Optional[str]:
+        return self.oracle.failure

@@ -11,16 +11,14 @@ which ManiSkill's conversion of recorded joint actions (extra steps where the de
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 import torch
 from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
-from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.geometry.rotation_conversions import matrix_to_euler_angles, quaternion_to_matrix
+from mani_skill.utils.gym_utils import inv_scale_action
 
 from mani_skill_space.oracles.base import Oracle
-from mani_skill_space.policy import Policy
+from mani_skill_space.policy import WrapsOracle
 
 CONTROL_MODE = "pd_ee_delta_pose"
 DELTA_FRAME = "root_translation:root_aligned_body_rotation"
@@ -31,7 +29,7 @@ step's motion plus the arm's lag behind its previous target, and the Panda's joi
 together at a third of them. (At half of them the wrist fell further behind at every clipped step of a fast turn.)"""
 
 
-class EndEffectorDeltaPose(Policy):
+class EndEffectorDeltaPose(WrapsOracle):
     """``oracle`` acting in ``pd_ee_delta_pose`` (see the module docstring)."""
 
     control_mode = CONTROL_MODE
@@ -59,14 +57,6 @@ class EndEffectorDeltaPose(Policy):
         self.model.compute_forward_kinematics(qpos)
         pose = self.model.get_link_pose(self.controller.ee_link.index)
         return np.asarray(pose.p), np.asarray(pose.q)
-
-    @property
-    def done(self) -> bool:
-        return self.oracle.done
-
-    @property
-    def failure(self) -> Optional[str]:
-        return self.oracle.failure
 
 
 def arm_delta_controller(env) -> PDEEPoseController:
