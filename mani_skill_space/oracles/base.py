@@ -22,9 +22,9 @@ from scipy.spatial.transform import Rotation
 from mani_skill_space.policy import Policy
 
 GRIPPER_OPEN = 1.0
+GRIPPER_CLOSED = -1.0
 HALF_TURN_ABOUT_APPROACH = np.array([0.0, 0.0, 0.0, 1.0])
 """wxyz: half a turn about the TCP's z (approach) axis."""
-GRIPPER_CLOSED = -1.0
 TCP_RAMP_STEPS = 5
 """Steps over which an oracle with a ``tcp_pace`` speeds up to it (and slows down from it)."""
 SURFACE_POINTS_PER_PART = 256
