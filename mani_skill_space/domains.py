@@ -139,13 +139,14 @@ def blackbody_rgb(temperature_k: float) -> np.ndarray:
     return rgb / rgb.max()
 
 
-def sample_sun_direction(rng: np.random.Generator) -> np.ndarray:
-    """Direction the sunlight travels (unit vector, pointing down), from the reference roll/pitch ranges.
+def sample_sun_direction(rng: np.random.Generator, pitch_range_deg: tuple[float, float] = SUN_PITCH_RANGE_DEG) -> np.ndarray:
+    """Direction the sunlight travels (unit vector, pointing down), from the reference roll/pitch ranges
+    (``pitch_range_deg`` replaces the pitch range, e.g. for a held-out sun direction).
 
     Roll tilts the sun sideways (about x), pitch tilts it forward/back (about y); (0, 0) is straight overhead.
     """
     roll = math.radians(rng.uniform(*SUN_ROLL_RANGE_DEG))
-    pitch = math.radians(rng.uniform(*SUN_PITCH_RANGE_DEG))
+    pitch = math.radians(rng.uniform(*pitch_range_deg))
     direction = np.array([0.0, 0.0, -1.0])
     rot_x = np.array([[1, 0, 0], [0, math.cos(roll), -math.sin(roll)], [0, math.sin(roll), math.cos(roll)]])
     rot_y = np.array([[math.cos(pitch), 0, math.sin(pitch)], [0, 1, 0], [-math.sin(pitch), 0, math.cos(pitch)]])

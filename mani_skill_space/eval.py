@@ -13,8 +13,14 @@ Policies: ``random``, ``zero``, ``oracle`` (the motion-planning solution of each
 acting in ``pd_ee_delta_pose``) or ``module:callable``
 (see ``mani_skill_space.policies``). A policy with a ``control_mode`` gets its env made in that mode.
 
-The suite (its env ids and kwargs), the policies and the counts are checked before any worker starts; a bad one is
-one line on stderr and exit status 2 (``--debug`` shows the traceback; see ``mani_skill_space.cli_support``).
+``--protocol NAME`` scores each policy on a generalisation protocol instead (``mani_skill_space.protocol``,
+shipped ones in ``tasks/generalisation/``): one row per policy (its training condition, recorded in a checkpoint),
+one column per test condition plus the in-distribution one, the generalisation gap of every test with Newcombe's
+interval; ``matrix.json``, ``matrix.md`` and ``matrix.png`` (a heat map) in the output folder.
+
+The suite or protocol (its env ids and kwargs), the policies and the counts are checked before any worker starts;
+a bad one is one line on stderr and exit status 2 (``--debug`` shows the traceback; see
+``mani_skill_space.cli_support``).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from __future__ import annotations
 import importlib
 import json
 import math
+import dataclasses
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -37,14 +44,17 @@ from tqdm import tqdm
 from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
 from mani_skill_space.metrics import EpisodeResult, summarize
 from mani_skill_space.policies import load_policy
+from mani_skill_space.protocol import Protocol, heat_map, load_protocol, markdown_matrix, matrix_row, protocol_suite
 from mani_skill_space.rollout import evaluation_env_kwargs, run_episode
 from mani_skill_space.suites import Configuration, Suite, load_suite
 
 
 @dataclass
 class Args:
-    suite: Path
+    suite: Optional[Path] = None
     """A suite: the name of a shipped suite (e.g. smoke) or the path of a .toml file."""
+    protocol: Optional[Path] = None
+    """Instead of a suite, a generalisation protocol: the name of a shipped one (e.g. levels) or a .toml file."""
     policy: tuple[str, ...] = ("oracle",)
     """One or more policies: random, zero, oracle, oracle-ee, checkpoint:PATH or module:callable."""
     output_dir: Path = Path("outputs/eval")
@@ -123,17 +133,42 @@ def check_policy(spec: str) -> None:
     load_policy(spec)
 
 
-def check_args(args: Args) -> Suite:
-    """The suite ``args`` name, loaded and checked (env ids and kwargs), after checking the policies and counts."""
+def check_args(args: Args) -> Suite | Protocol:
+    """The suite or protocol ``args`` name, loaded and checked (env ids and kwargs), after checking the policies
+    and counts; for a protocol, also every policy's row (a checkpoint's training condition with each test)."""
     check_at_least("--num-workers", args.num_workers, 1)
     check_at_least("--video", args.video, 0)
     check_at_least("--episodes", args.episodes, 1)
     if not args.policy:
         raise ValueError("--policy needs at least one policy: random, zero, oracle, oracle-ee, checkpoint:PATH or module:callable")
-    suite = load_suite(args.suite)
+    if (args.suite is None) == (args.protocol is None):
+        raise ValueError("give either --suite (a benchmark suite) or --protocol (a generalisation protocol)")
     for policy in args.policy:
         check_policy(policy)
-    return suite
+    if args.suite is not None:
+        return load_suite(args.suite)
+    protocol = load_protocol(args.protocol)
+    for policy in args.policy:
+        protocol_suite(protocol, *training_condition(protocol, policy))
+    return protocol
+
+
+def training_condition(protocol: Protocol, spec: str) -> tuple[str, dict]:
+    """The env id and kwargs the policy ``spec`` was trained in: what it records (a checkpoint's), else the
+    protocol's ``[train]``."""
+    recorded = getattr(load_policy(spec), "training_condition", None)
+    return recorded if recorded is not None else (protocol.env_id, protocol.train_kwargs)
+
+
+def evaluate_protocol(protocol: Protocol, args: Args) -> dict:
+    """Every policy's row of the protocol's matrix (each row's cells run as a suite)."""
+    rows = []
+    for policy in args.policy:
+        env_id, kwargs = training_condition(protocol, policy)
+        report = evaluate(protocol_suite(protocol, env_id, kwargs), dataclasses.replace(args, policy=(policy,)))
+        rows.append(matrix_row(policy, kwargs, report["rows"]))
+    columns = [c.name for c in protocol_suite(protocol, protocol.env_id, protocol.train_kwargs).configurations]
+    return {"protocol": protocol.name, "protocol_file": str(protocol.path), "env_id": protocol.env_id, "metric": "success_at_end", "columns": columns, "rows": rows}
 
 
 def evaluate(suite: Suite, args: Args) -> dict:
@@ -187,15 +222,27 @@ def _slug(name: str) -> str:
 def main(args: Args) -> dict:
     with checking_inputs():
         suite = check_args(args)
-    report = evaluate(suite, args)
     output = args.output_dir
     output.mkdir(parents=True, exist_ok=True)
+    if isinstance(suite, Protocol):
+        return write_matrix(evaluate_protocol(suite, args), output)
+    report = evaluate(suite, args)
     (output / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     table = markdown_table(report)
     (output / "results.md").write_text(table + "\n")
     print(table)
     print(f"\nresults: {output / 'results.json'} and {output / 'results.md'}")
     return report
+
+
+def write_matrix(matrix: dict, output: Path) -> dict:
+    (output / "matrix.json").write_text(json.dumps(matrix, indent=1) + "\n")
+    table = markdown_matrix(matrix)
+    (output / "matrix.md").write_text(table + "\n")
+    print(table)
+    image = heat_map(matrix, output / "matrix.png")
+    print(f"\nresults: {output / 'matrix.json'}, {output / 'matrix.md'}" + (f" and {image}" if image else " (no heat map: it needs matplotlib)"))
+    return matrix
 
 
 def cli(argv: Optional[Sequence[str]] = None) -> None:

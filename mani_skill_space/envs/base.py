@@ -27,13 +27,17 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.envs.utils.observations import ALL_VISUAL_TEXTURES, parse_obs_mode_to_struct
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
+from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
+from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConfig, SceneConfig, SimConfig
 
 from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
 from mani_skill_space.envs.building import bounding_radius, build_actor_per_env, build_asset_actor, build_dynamic_per_env, build_flat_ground, build_skydome, padded_points
+from mani_skill_space.factors import FactorShifts, camera_offsets, check_factor_kwargs, jittered_camera_frames
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.kwarg_checks import KwargError, checked_choice, checked_natural, checked_number
+from mani_skill_space.levels import LevelRange, check_level_kwargs
 from mani_skill_space.procgen.asset import Asset, look_at
 from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE, check_clearance
 from mani_skill_space.procgen.resting import resting_orientations
@@ -81,6 +85,8 @@ class SpaceManipulationEnv(BaseEnv):
     SIM_FREQ: ClassVar[int] = 100
     CONTROL_FREQ: ClassVar[int] = 20
     REWARD_TABLE: ClassVar[RewardTable]
+    SUPPORTS_OBJECT_SCALE: ClassVar[bool] = False
+    """Whether ``object_scale`` applies (tasks whose object fits nothing it must be scaled with, e.g. a socket)."""
 
     agent: Union[Panda, PandaWristCam]
 
@@ -94,6 +100,14 @@ class SpaceManipulationEnv(BaseEnv):
         robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         num_envs: int = 1,
         reconfiguration_freq: Optional[int] = None,
+        num_levels: int = 0,
+        start_level: int = 0,
+        sun_pitch_range: Optional[tuple[float, float]] = None,
+        camera_jitter: float = 0.0,
+        object_scale: float = 1.0,
+        object_mass_scale: float = 1.0,
+        object_friction: Optional[float] = None,
+        gravity_scale: float = 1.0,
         **kwargs,
     ):
         modes = {key: kwargs[key] for key in ("obs_mode", "reward_mode") if key in kwargs}
@@ -104,11 +118,23 @@ class SpaceManipulationEnv(BaseEnv):
             control_mode=control_mode,
             robot_init_qpos_noise=robot_init_qpos_noise,
             reconfiguration_freq=reconfiguration_freq,
+            num_levels=num_levels,
+            start_level=start_level,
+            sun_pitch_range=sun_pitch_range,
+            camera_jitter=camera_jitter,
+            object_scale=object_scale,
+            object_mass_scale=object_mass_scale,
+            object_friction=object_friction,
+            gravity_scale=gravity_scale,
             **modes,
         )
         self.domain = get_domain(checked["domain"], self.SUPPORTED_DOMAINS)
         self.asset_source = checked["asset_source"]
         self.robot_init_qpos_noise = checked["robot_init_qpos_noise"]
+        self.levels_config = LevelRange(checked["num_levels"], checked["start_level"])
+        self.factors = FactorShifts.from_checked(checked)
+        self.levels = np.zeros(num_envs, dtype=np.int64)
+        """Each env's level (the seed of its scene's procedural content), drawn at every reconfiguration."""
         self._wrist_wrench_reading: Optional[torch.Tensor] = None
         self.mount = self._make_mount()
         reconfiguration_freq = checked["reconfiguration_freq"]
@@ -153,6 +179,8 @@ class SpaceManipulationEnv(BaseEnv):
             if kwargs.get("reconfiguration_freq") is None
             else checked_natural("reconfiguration_freq", kwargs["reconfiguration_freq"], "reconfigure every that many resets; 0: never"),
         )
+        checked.update(check_level_kwargs(kwargs))
+        checked.update(check_factor_kwargs(kwargs, supports_object_scale=cls.SUPPORTS_OBJECT_SCALE, task=cls.__name__))
         if kwargs.get("obs_mode") is not None:
             checked["obs_mode"] = _checked_obs_mode(kwargs["obs_mode"])
         if kwargs.get("reward_mode") is not None:
@@ -171,7 +199,7 @@ class SpaceManipulationEnv(BaseEnv):
             sim_freq=self.SIM_FREQ,
             control_freq=self.CONTROL_FREQ,
             spacing=ENV_SPACING,
-            scene_config=SceneConfig(gravity=self.domain.gravity_vector),
+            scene_config=SceneConfig(gravity=np.asarray(self.domain.gravity_vector) * self.factors.gravity_scale),
             default_materials_config=DefaultMaterialsConfig(static_friction=1.0, dynamic_friction=1.0, restitution=0.0),
             gpu_memory_config=GPUMemoryConfig(
                 max_rigid_contact_count=max(2**19, self.num_envs * 2**12),
@@ -182,7 +210,7 @@ class SpaceManipulationEnv(BaseEnv):
     @property
     def _default_sensor_configs(self):
         return [
-            CameraConfig("base_camera", sapien.Pose(self.mount.frames["base_camera"]), SENSOR_SIZE, SENSOR_SIZE, np.deg2rad(90), 0.01, SENSOR_FAR),
+            CameraConfig("base_camera", self._base_camera_pose(), SENSOR_SIZE, SENSOR_SIZE, np.deg2rad(90), 0.01, SENSOR_FAR),
             CameraConfig(
                 "wrist_camera",
                 sapien.Pose(look_at(WRIST_CAMERA_EYE, WRIST_CAMERA_TARGET, up=(1.0, 0.0, 0.0))),
@@ -199,6 +227,17 @@ class SpaceManipulationEnv(BaseEnv):
     def _default_human_render_camera_configs(self):
         return CameraConfig("render_camera", sapien.Pose(self._render_camera_pose()), 512, 512, 1.0, 0.01, SENSOR_FAR + 5)
 
+    def _base_camera_pose(self):
+        """The mount's base camera; with ``camera_jitter`` one pose per env, its eye and the point it looks at
+        each moved by that env's offsets (drawn at reconfiguration from the episode seed: ManiSkill's way of
+        varying a camera per sub-scene)."""
+        frame = self.mount.frames["base_camera"]
+        offsets = getattr(self, "_camera_offsets", None)
+        if offsets is None:
+            return sapien.Pose(frame)
+        poses = [sapien.Pose(matrix) for matrix in jittered_camera_frames(frame, offsets)]
+        return Pose.create_from_pq(torch.tensor(np.stack([p.p for p in poses])), torch.tensor(np.stack([p.q for p in poses])))
+
     def _render_camera_pose(self) -> np.ndarray:
         return look_at((1.3, -1.05, 0.95), (-0.1, 0.0, 0.25))
 
@@ -212,8 +251,11 @@ class SpaceManipulationEnv(BaseEnv):
     def _load_domain_scene(self):
         """Mount, sky, ground and the sun's direction for every env (call first in ``_load_scene``)."""
         self._graspable_radius: dict[str, float] = {}
+        self._draw_levels()
         self.mount_actor = build_asset_actor(self.scene, self.mount, "mount", body_type="static")
-        self._sun_directions = [sample_sun_direction(np.random.default_rng(s)) for s in self._asset_seeds()]
+        pitch = self.factors.sun_pitch_range
+        self._sun_directions = [sample_sun_direction(np.random.default_rng(s), pitch_range_deg=pitch) for s in self._asset_seeds()]
+        self._camera_offsets = camera_offsets(self._episode_seed, self.factors.camera_jitter)
         if self.scene.can_render():
             self.skydome = build_skydome(self.scene, str(sky_texture_path(self.domain.sky)))
         if self.domain.terrain is not None:
@@ -224,9 +266,15 @@ class SpaceManipulationEnv(BaseEnv):
         else:
             self.ground = None
 
+    def _draw_levels(self):
+        """Each env's level for this reconfiguration (``LevelRange.draw``), and the RNG its content comes from."""
+        self.levels = self.levels_config.draw(self._episode_seed, self._batched_episode_rng)
+        self._level_rng = BatchedRNG.from_seeds(self.levels, backend=self._batched_rng_backend)
+
     def _asset_seeds(self) -> np.ndarray:
-        """One fresh seed per env from its episode RNG (identical on CPU and GPU for the same episode seed)."""
-        return self._batched_episode_rng.randint(0, 2**31 - 1)
+        """One fresh seed per env from its level's RNG: every call in a reconfiguration draws the next (sun,
+        terrain, then the task's objects), so the scene's procedural content is a function of the level alone."""
+        return self._level_rng.randint(0, 2**31 - 1)
 
     def _load_lighting(self, options: dict):
         self.scene.set_ambient_light(self.domain.ambient_color.tolist())
@@ -305,10 +353,12 @@ class SpaceManipulationEnv(BaseEnv):
         return self.REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
 
     def build_graspable(self, assets: list[Asset], name: str, never_sleep: bool = False):
-        """The per-env dynamic object made of ``assets`` (``building.build_dynamic_per_env``), remembered with its
+        """The per-env dynamic object made of ``assets`` (``building.build_dynamic_per_env``) with the object factor
+        shifts applied (``object_scale``, ``object_mass_scale``, ``object_friction``), remembered with its
         bounding radius so that ``is_grasping`` can skip its contact query when it is out of the fingers' reach.
         ``never_sleep``: PhysX never puts it to sleep, however slowly it moves (in zero gravity a slow drift is
         real motion, e.g. of a part let go in orbit)."""
+        assets = [self.factors.with_material(asset) for asset in assets]
         actor = build_dynamic_per_env(self.scene, assets, name)
         if never_sleep:
             for body in actor._bodies:

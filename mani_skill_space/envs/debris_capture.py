@@ -88,6 +88,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
     DEFAULT_DOMAIN = "orbit"
     EPISODE_SECONDS = 10.0
     REWARD_TABLE = REWARD_TABLE
+    SUPPORTS_OBJECT_SCALE = True
 
     def __init__(self, *args, difficulty: float = 1.0, **kwargs):
         self.difficulty = self.check_task_kwargs(difficulty=difficulty)["difficulty"]
@@ -116,6 +117,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
             assets = [make_debris(seed) for seed in seeds]
         else:
             assets = [load_dataset_object(DATASET_DEBRIS[seed % len(DATASET_DEBRIS)]) for seed in seeds]
+        assets = [self.factors.scaled(asset) for asset in assets]
         self.debris_assets = assets
         self.debris = self.build_graspable(assets, "debris", never_sleep=True)
         # free flight: no damping

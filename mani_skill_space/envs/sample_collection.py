@@ -63,6 +63,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
     DEFAULT_DOMAIN = "mars"
     EPISODE_SECONDS = 7.5
     REWARD_TABLE = REWARD_TABLE
+    SUPPORTS_OBJECT_SCALE = True
 
     def _make_mount(self):
         return make_rover()
@@ -74,6 +75,7 @@ class SampleCollectionEnv(SpaceManipulationEnv):
             assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
         else:
             assets = [load_dataset_object("sample_tube")] * self.num_envs
+        assets = [self.factors.scaled(asset) for asset in assets]
         self.sample = self.build_graspable(assets, "sample")
         # a tube lies flat: it never rests on its end caps
         self._placement = RestingPlacement(assets, self.device, exclude_axis=np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None)

@@ -83,6 +83,8 @@ class CheckpointPolicy(Policy):
         self.control_mode = self.checkpoint["control_mode"]
         self.obs_mode = self.checkpoint["obs_mode"]
         self.env_id = self.checkpoint["env_id"]
+        self.training_condition = (self.env_id, dict(self.checkpoint["env_kwargs"]))
+        """The env id and kwargs of the training environment (what a generalisation protocol calls ``train``)."""
         self.diffusion = self.checkpoint.get("diffusion")
         if self.diffusion is not None:
             from diffusers.schedulers.scheduling_ddpm import DDPMScheduler

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Optional
 
 import numpy as np
@@ -72,6 +72,27 @@ class Asset:
             raise ValueError(f"{self.name}: visual mesh is not a closed volume; cannot compute its mass")
         props = trimesh.triangles.mass_properties(mesh.triangles, density=self.density)
         return float(props.mass), np.asarray(props.center_mass), np.asarray(props.inertia)
+
+    def scaled(self, factor: float) -> "Asset":
+        """The asset ``factor`` times as large about its origin: meshes, solid and frame positions (``info`` keeps
+        the generated sizes)."""
+
+        def grown(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+            copy = mesh.copy()
+            copy.apply_scale(factor)
+            return copy
+
+        frames = {}
+        for name, frame in self.frames.items():
+            frames[name] = np.array(frame, dtype=np.float64)
+            frames[name][:3, 3] *= factor
+        return replace(
+            self,
+            visual_parts=tuple(replace(part, mesh=grown(part.mesh)) for part in self.visual_parts),
+            collision_parts=tuple(replace(part, mesh=grown(part.mesh)) for part in self.collision_parts),
+            solid=None if self.solid is None else grown(self.solid),
+            frames=frames,
+        )
 
 
 def box_mesh(half_size, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
