@@ -47,6 +47,8 @@ CASES = [
     ("eval", lambda t: ["--suite", "smoke", "--policy", "no_such_module:make"], "cannot import module 'no_such_module'"),
     ("eval", lambda t: ["--suite", "smoke", "--policy", "checkpoint:missing.pt"], "missing.pt"),
     ("eval", lambda t: ["--suite", "smoke", "--num-workers", "0"], "--num-workers must be at least 1, got 0"),
+    ("eval", lambda t: ["--policy", "zero"], "give either --suite (a benchmark suite) or --protocol (a generalisation protocol)"),
+    ("eval", lambda t: ["--protocol", "no_such_protocol"], "unknown protocol 'no_such_protocol'; shipped protocols: "),
     ("demos", lambda t: ["-e", "NoSuchTask-v1"], "no oracle for env id 'NoSuchTask-v1'; valid choices: SampleCollection-v1"),
     ("demos", lambda t: ["--env-kwargs", "{domain: moon}"], "--env-kwargs is not valid JSON"),
     ("demos", lambda t: ["--env-kwargs", "[1, 2]"], "--env-kwargs must be a JSON object"),
