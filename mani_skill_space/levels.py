@@ -34,6 +34,13 @@ class LevelRange:
             return self.start_level + np.asarray(episode_seeds, dtype=np.int64)
         return self.start_level + np.asarray(episode_rng.randint(0, self.num_levels), dtype=np.int64)
 
+    def level_of(self, episode_seed: int) -> int:
+        """The level a single env builds when reset (with a rebuild) with ``episode_seed``: what ``draw`` gives
+        with ManiSkill's episode RNG, a ``RandomState`` seeded with the episode seed."""
+        if self.num_levels == 0:
+            return self.start_level + int(episode_seed)
+        return self.start_level + int(np.random.RandomState(int(episode_seed)).randint(0, self.num_levels))
+
     @property
     def bounded(self) -> bool:
         return self.num_levels > 0

@@ -221,8 +221,7 @@ def heat_map(matrix: dict, path: Path) -> Optional[Path]:
     axes.set_yticks(range(len(rows)), [f"{row['policy']}\n({row['label']})" for row in rows], fontsize=7)
     axes.set_title(f"{matrix['protocol']}: {metric}")
     figure.colorbar(image, ax=axes, fraction=0.04)
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    figure.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(figure)
     return path
 

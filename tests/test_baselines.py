@@ -152,3 +152,39 @@ def test_the_best_checkpoint_is_kept_by_success_at_end_then_success_once_then_re
         checkpoint.write_text(str(version))
         assert best.update(dict(zip(BestCheckpoint.KEYS, scores))) == is_best
     assert best.path == tmp_path / "best.pt" and best.path.read_text() == "4"
+
+
+def test_diversity_curve_scores_each_checkpoint_on_the_protocol_and_counts_its_levels(tmp_path):
+    from mani_skill_space.learning import BehaviourCloningPolicy, save_checkpoint
+
+    protocol = tmp_path / "levels.toml"
+    protocol.write_text(
+        textwrap.dedent(
+            """
+            name = "levels-check"
+            episodes = 1
+            seed_start = 20000
+            [train]
+            env_id = "SampleCollection-v1"
+            kwargs = { domain = "mars", asset_source = "procedural", num_levels = 10 }
+            [[tests]]
+            name = "held-out levels"
+            kwargs = { num_levels = 0, start_level = 1000000 }
+            """
+        )
+    )
+    checkpoints, demos = [], []
+    for num_levels in (1, 3):
+        model_kwargs = dict(state_dim=49, action_dim=7, hidden=8, depth=1)
+        kwargs = dict(domain="mars", asset_source="procedural", num_levels=num_levels, start_level=0)
+        checkpoints.append(save_checkpoint(tmp_path / f"bc{num_levels}.pt", "bc", BehaviourCloningPolicy(**model_kwargs), model_kwargs, "SampleCollection-v1", kwargs, "state", "pd_ee_delta_pose"))
+        demos.append(tmp_path / f"levels{num_levels}.h5")
+        episodes = [dict(episode_id=i, episode_seed=seed, success=seed != 7) for i, seed in enumerate(range(8))]
+        demos[-1].with_suffix(".json").write_text(json.dumps(dict(env_info={}, episodes=episodes)))
+    curve = _baseline("diversity_curve")
+    rows = curve.main(curve.Args(checkpoints=tuple(checkpoints), demos=tuple(demos), protocol=str(protocol), output=tmp_path / "curve", num_workers=1))
+    assert [(r["num_levels"], r["demonstrations"]) for r in rows] == [(1, 7), (3, 7)]
+    assert rows[0]["levels_in_demos"] == 1 and 1 < rows[1]["levels_in_demos"] <= 3
+    assert {"train: success", "held-out levels: success", "gap held-out levels: ci_low"} <= set(rows[0])
+    assert (tmp_path / "curve.csv").read_text().count("\n") == 3 and (tmp_path / "curve.png").stat().st_size > 0
+    assert (tmp_path / "curve_matrix.md").is_file()

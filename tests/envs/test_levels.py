@@ -70,6 +70,7 @@ def test_disjoint_level_ranges_give_disjoint_scenes(make):
         for seed in range(8):
             env.reset(seed=seed)
             seen[int(env.unwrapped.levels[0])] = scene_digest(env)
+            assert LevelRange(3, start_level).level_of(seed) == int(env.unwrapped.levels[0])
         return seen
 
     low, high = digests(0), digests(1000)
