@@ -20,7 +20,7 @@ from typing import Optional, Sequence
 PROG = "mani-skill-space"
 
 TOOLS = {
-    "eval": "evaluate policies on a benchmark suite (a shipped suite name such as smoke, or a .toml file)",
+    "eval": "evaluate policies on a benchmark suite (a shipped suite name such as smoke, or a .toml file) or a generalisation protocol (--protocol levels)",
     "demos": "record oracle demonstrations (ManiSkill trajectory format)",
     "replay": "replay or convert demonstrations (ManiSkill's replay_trajectory with our envs registered)",
     "bench": "measure env speed against ManiSkill's own tasks",

@@ -1,0 +1,72 @@
+"""Score every checkpoint of the manifest with the evaluation CLI, on the seeds the manifest lists.
+
+    python baselines/score_checkpoints.py                      # baselines/checkpoints/manifest.toml, every seed
+    python baselines/score_checkpoints.py --episodes 2         # a quick check that each loads and runs
+
+Writes ``<output>.json`` and ``<output>.md`` (the README's baseline table: every checkpoint's success with 95% Wilson
+intervals next to the success its manifest entry records).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import tyro
+
+from mani_skill_space import eval as evaluation
+from mani_skill_space.learning.manifest import load_manifest
+from mani_skill_space.suites import Configuration, Suite
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class Args:
+    manifest: Path = ROOT / "baselines" / "checkpoints" / "manifest.toml"
+    output: Path = ROOT / "baselines" / "results" / "checkpoints"
+    episodes: Optional[int] = None
+    """Score only the first N of each entry's seeds."""
+    num_workers: int = os.cpu_count() or 1
+
+
+def main(args: Args) -> list[dict]:
+    rows = []
+    for entry in load_manifest(args.manifest):
+        suite = Suite(entry.name, args.manifest, configurations=(Configuration(entry.name, entry.env_id, entry.kwargs, entry.episodes, entry.seed_start, line=0),))
+        run_args = evaluation.Args(suite=args.manifest, policy=(entry.policy,), episodes=args.episodes, num_workers=args.num_workers)
+        (row,) = evaluation.evaluate(suite, run_args)["rows"]
+        rows.append(dict(name=entry.name, env_id=entry.env_id, kwargs=entry.kwargs, command=entry.command, manifest_success_at_end=entry.success_at_end, summary=row["summary"], seeds=[e["seed"] for e in row["episodes"]]))
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.with_suffix(".json").write_text(json.dumps(rows, indent=1) + "\n")
+    table = markdown_table(rows)
+    args.output.with_suffix(".md").write_text(table + "\n")
+    print(table)
+    return rows
+
+
+def markdown_table(rows: list[dict]) -> str:
+    lines = [
+        "| checkpoint | env | kwargs | episodes (seeds) | success_once | success_at_end | return | manifest |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        s = row["summary"]
+        kwargs = ", ".join(f"{k}={v}" for k, v in row["kwargs"].items())
+        seeds = f"{s['episodes']} ({row['seeds'][0]}-{row['seeds'][-1]})"
+        lines.append(
+            f"| {row['name']} | {row['env_id']} | {kwargs} | {seeds} | {_rate(s['success_once'], s['success_once_ci95'])} "
+            f"| {_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {100 * row['manifest_success_at_end']:.0f}% |"
+        )
+    return "\n".join(lines)
+
+
+def _rate(rate: float, interval) -> str:
+    return f"{100 * rate:.0f}% [{100 * interval[0]:.0f}, {100 * interval[1]:.0f}]"
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
