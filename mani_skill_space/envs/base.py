@@ -26,6 +26,7 @@ from mani_skill.agents.robots import Panda, PandaWristCam
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.envs.utils.observations import ALL_VISUAL_TEXTURES, parse_obs_mode_to_struct
 from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
 from mani_skill.utils.structs.pose import Pose
@@ -34,6 +35,7 @@ from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConf
 from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
 from mani_skill_space.envs.building import bounding_radius, build_actor_per_env, build_asset_actor, build_dynamic_per_env, build_flat_ground, build_skydome, padded_points
+from mani_skill_space.delay import DelayLine, check_delay_kwargs, drift_moves, with_missing_replaced
 from mani_skill_space.factors import FactorShifts, camera_offsets, check_factor_kwargs, jittered_camera_frames
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.kwarg_checks import KwargError, checked_choice, checked_natural, checked_number
@@ -108,6 +110,9 @@ class SpaceManipulationEnv(BaseEnv):
         object_mass_scale: float = 1.0,
         object_friction: Optional[float] = None,
         gravity_scale: float = 1.0,
+        action_delay: Union[None, int, tuple[int, int]] = None,
+        observation_delay: Union[None, int, tuple[int, int]] = None,
+        delay_drift: float = 0.0,
         **kwargs,
     ):
         modes = {key: kwargs[key] for key in ("obs_mode", "reward_mode") if key in kwargs}
@@ -126,6 +131,9 @@ class SpaceManipulationEnv(BaseEnv):
             object_mass_scale=object_mass_scale,
             object_friction=object_friction,
             gravity_scale=gravity_scale,
+            action_delay=action_delay,
+            observation_delay=observation_delay,
+            delay_drift=delay_drift,
             **modes,
         )
         self.domain = get_domain(checked["domain"], self.SUPPORTED_DOMAINS)
@@ -133,6 +141,9 @@ class SpaceManipulationEnv(BaseEnv):
         self.robot_init_qpos_noise = checked["robot_init_qpos_noise"]
         self.levels_config = LevelRange(checked["num_levels"], checked["start_level"])
         self.factors = FactorShifts.from_checked(checked)
+        self.action_delay, self.observation_delay, self.delay_drift = checked["action_delay"], checked["observation_delay"], checked["delay_drift"]
+        self._action_line: Optional[DelayLine] = None
+        self._observation_line: Optional[DelayLine] = None
         self.levels = np.zeros(num_envs, dtype=np.int64)
         """Each env's level (the seed of its scene's procedural content), drawn at every reconfiguration."""
         self._wrist_wrench_reading: Optional[torch.Tensor] = None
@@ -180,6 +191,9 @@ class SpaceManipulationEnv(BaseEnv):
             else checked_natural("reconfiguration_freq", kwargs["reconfiguration_freq"], "reconfigure every that many resets; 0: never"),
         )
         checked.update(check_level_kwargs(kwargs))
+        checked.update(check_delay_kwargs(kwargs))
+        if checked["action_delay"].active and not holds_with_a_fixed_action(checked["control_mode"]):
+            raise KwargError("action_delay", f"action_delay needs a control mode in which the steps before the first delayed action can hold still: a delta mode or pd_joint_pos, not {checked['control_mode']!r}")
         checked.update(check_factor_kwargs(kwargs, supports_object_scale=cls.SUPPORTS_OBJECT_SCALE, task=cls.__name__))
         if kwargs.get("obs_mode") is not None:
             checked["obs_mode"] = _checked_obs_mode(kwargs["obs_mode"])
@@ -307,6 +321,46 @@ class SpaceManipulationEnv(BaseEnv):
         self._arm_base_position = mount[:3, 3].expand(self.num_envs, 3)
         self._arm_base_rotation = mount[:3, :3].expand(self.num_envs, 3, 3)
         self._wrist_link_index = int(torch.as_tensor(gripper.joints[0].parent_link.index).flatten()[0])
+        self._action_line = DelayLine(self.num_envs, self.action_delay, self.device) if self.action_delay.active else None
+        self._observation_line = DelayLine(self.num_envs, self.observation_delay, self.device) if self.observation_delay.active else None
+
+    # ------------------------------------------------------------------ communication delay
+    def reset(self, seed=None, options=None):
+        """ManiSkill's reset; with a communication delay, the reset envs also draw their delays (from the episode
+        seed) and forget what was sent before."""
+        obs, info = super().reset(seed=seed, options=options)
+        if self._action_line is not None or self._observation_line is not None:
+            env_idx = (options or {}).get("env_idx")
+            env_idx = torch.arange(self.num_envs, device=self.device) if env_idx is None else torch.as_tensor(env_idx, device=self.device)
+            rng = self._batched_episode_rng[env_idx]
+            for line, first in ((self._action_line, None), (self._observation_line, obs)):
+                if line is not None:
+                    line.reset(env_idx, torch.as_tensor(rng.randint(line.delays.low, line.delays.high + 1)), first)
+        return obs, info
+
+    def step(self, action):
+        """ManiSkill's step with the communication delay: the action applied is the one sent ``action_delay``
+        steps ago (before any was, one that holds still: zero for delta modes, the current targets otherwise), the
+        observation returned the one of ``observation_delay`` steps ago (the reset observation before that).
+        Reward, termination and info are computed from the simulation now, undelayed."""
+        if self._action_line is not None and action is not None:
+            self._action_line.push(torch.as_tensor(action, dtype=torch.float32, device=self.device).reshape(self.num_envs, -1))
+            delayed, missing = self._action_line.read()
+            action = with_missing_replaced(delayed, missing, self.hold_action())
+        obs, reward, terminated, truncated, info = super().step(action)
+        if self._observation_line is not None:
+            self._observation_line.push(obs)
+            obs, _ = self._observation_line.read()
+        if self.delay_drift > 0:
+            for line in (self._action_line, self._observation_line):
+                if line is not None:
+                    line.drift(drift_moves(torch.as_tensor(self._batched_episode_rng.uniform(0.0, 1.0)), self.delay_drift))
+        return obs, reward, terminated, truncated, info
+
+    def hold_action(self) -> torch.Tensor:
+        """(num_envs, action_dim): the action that leaves the robot as it is commanded now (zero for delta
+        controllers; the current joint targets, in action units, for joint-position ones such as the gripper's)."""
+        return torch.cat([hold_action_of(controller, self.num_envs) for controller in self.agent.controller.controllers.values()], dim=-1).to(self.device)
 
     # ------------------------------------------------------------------ step
     def _step_action(self, action):
@@ -560,6 +614,24 @@ def _unflattened_like(template: dict, flat: torch.Tensor, start: int = 0) -> tup
             result[key] = flat[:, start : start + width]
             start += width
     return result, start
+
+
+def holds_with_a_fixed_action(control_mode: str) -> bool:
+    """Whether ``hold_action_of`` knows the hold action of every controller of ``control_mode``."""
+    return "delta" in control_mode or control_mode == "pd_joint_pos"
+
+
+def hold_action_of(controller, num_envs: int) -> torch.Tensor:
+    """The action (num_envs, dim) that keeps one of ManiSkill's controllers where it is commanded now."""
+    dim = controller.single_action_space.shape[0]
+    if getattr(controller.config, "use_delta", False):
+        return torch.zeros((num_envs, dim))
+    target = controller._target_qpos
+    if hasattr(controller, "control_joint_indices"):  # a mimic controller (the gripper): one action per control joint
+        target = target[:, controller.control_joint_indices]
+    if getattr(controller, "_normalize_action", False):
+        target = inv_scale_action(target, controller.action_space_low, controller.action_space_high)
+    return target.reshape(num_envs, dim).float().cpu()
 
 
 @lru_cache
