@@ -24,6 +24,14 @@ def test_oracle_solves_sample_collection(domain, asset_source):
     env.close()
 
 
+@pytest.mark.parametrize("domain, asset_source, seed", [("mars", "dataset", 11), ("moon", "procedural", 12), ("asteroid", "dataset", 13), ("earth", "procedural", 14)])
+def test_oracle_collects_three_samples(domain, asset_source, seed):
+    env = gym.make("MultiSampleCollection-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("MultiSampleCollection-v1"), seed)
+    env.close()
+    assert result.success_once and result.success_at_end, (domain, asset_source, seed, result.failure)
+
+
 def test_oracle_gives_the_same_episode_for_the_same_seed():
     env = gym.make("SampleCollection-v1", control_mode="pd_joint_pos", render_backend="none")
     first = run_episode(env, oracle_for("SampleCollection-v1"), 3)

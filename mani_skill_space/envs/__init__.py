@@ -4,6 +4,7 @@ from mani_skill.utils.registration import REGISTERED_ENVS
 
 from mani_skill_space.envs.base import SpaceManipulationEnv
 from mani_skill_space.envs.debris_capture import DebrisCaptureEnv
+from mani_skill_space.envs.multi_sample_collection import MultiSampleCollectionEnv
 from mani_skill_space.envs.peg_in_hole_assembly import PegInHoleAssemblyEnv
 from mani_skill_space.envs.sample_collection import SampleCollectionEnv
 from mani_skill_space.envs.solar_panel_assembly import SolarPanelAssemblyEnv
@@ -13,6 +14,7 @@ TASKS: dict[str, type[SpaceManipulationEnv]] = {
     "PegInHoleAssembly-v1": PegInHoleAssemblyEnv,
     "DebrisCapture-v1": DebrisCaptureEnv,
     "SolarPanelAssembly-v1": SolarPanelAssemblyEnv,
+    "MultiSampleCollection-v1": MultiSampleCollectionEnv,
 }
 
 
@@ -24,4 +26,4 @@ def task_class(env_id: str) -> type[SpaceManipulationEnv]:
     return TASKS[env_id]
 
 
-__all__ = ["DebrisCaptureEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SolarPanelAssemblyEnv", "SpaceManipulationEnv", "TASKS", "task_class"]
+__all__ = ["DebrisCaptureEnv", "MultiSampleCollectionEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SolarPanelAssemblyEnv", "SpaceManipulationEnv", "TASKS", "task_class"]
