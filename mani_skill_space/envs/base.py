@@ -26,16 +26,16 @@ from mani_skill.agents.robots import Panda, PandaWristCam
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.envs.utils.observations import ALL_VISUAL_TEXTURES, parse_obs_mode_to_struct
 from mani_skill.sensors.camera import CameraConfig
-from mani_skill.utils.gym_utils import inv_scale_action
-from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
 from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
+from mani_skill.utils.geometry.rotation_conversions import quaternion_multiply, quaternion_to_matrix
+from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import DefaultMaterialsConfig, GPUMemoryConfig, SceneConfig, SimConfig
 
 from mani_skill_space.dataset import sky_texture_path
 from mani_skill_space.domains import DOMAINS, get_domain, sample_sun_direction
-from mani_skill_space.envs.building import bounding_radius, build_actor_per_env, build_asset_actor, build_dynamic_per_env, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.delay import DelayLine, check_delay_kwargs, drift_moves, with_missing_replaced
+from mani_skill_space.envs.building import bounding_radius, build_actor_per_env, build_asset_actor, build_dynamic_per_env, build_flat_ground, build_skydome, padded_points
 from mani_skill_space.factors import FactorShifts, camera_offsets, check_factor_kwargs, jittered_camera_frames
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.kwarg_checks import KwargError, checked_choice, checked_natural, checked_number
@@ -407,8 +407,9 @@ class SpaceManipulationEnv(BaseEnv):
         return self.REWARD_TABLE.normalize(self.compute_dense_reward(obs, action, info))
 
     def build_graspable(self, assets: list[Asset], name: str, never_sleep: bool = False):
-        """The per-env dynamic object made of ``assets`` (``building.build_dynamic_per_env``) with the object factor
-        shifts applied (``object_scale``, ``object_mass_scale``, ``object_friction``), remembered with its
+        """The per-env dynamic object made of ``assets`` (``building.build_dynamic_per_env``) with the material factor
+        shifts applied (``object_mass_scale``, ``object_friction``; tasks with ``object_scale`` scale their assets
+        with ``self.factors.scaled`` before), remembered with its
         bounding radius so that ``is_grasping`` can skip its contact query when it is out of the fingers' reach.
         ``never_sleep``: PhysX never puts it to sleep, however slowly it moves (in zero gravity a slow drift is
         real motion, e.g. of a part let go in orbit)."""
