@@ -25,11 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from mani_skill_space.learning.checkpoints import load_checkpoint
+from mani_skill_space.protocol import task_kwargs
 
 MANIFEST_KEYS = {"name", "path", "env_id", "kwargs", "obs_mode", "control_mode", "command", "success_at_end", "success_once", "episodes", "seed_start", "notes"}
 REQUIRED_KEYS = MANIFEST_KEYS - {"success_once", "notes"}
-RUN_KWARGS = ("sensor_configs", "human_render_camera_configs", "viewer_camera_configs")
-"""Recorded env kwargs that say how the demonstrations were rendered, not which task it is."""
 
 
 class ManifestError(ValueError):
@@ -94,7 +93,3 @@ def _entry(path: Path, index: int, table: dict) -> ManifestEntry:
         if recorded[key] != value:
             raise ManifestError(f"{where}: {key} is {value!r} but {entry.path.name} records {recorded[key]!r}")
     return entry
-
-
-def task_kwargs(env_kwargs: dict[str, Any]) -> dict[str, Any]:
-    return {key: value for key, value in env_kwargs.items() if key not in RUN_KWARGS}
