@@ -36,7 +36,13 @@ from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.procgen.solar_panel import make_panel, make_socket_base, make_solar_layout, make_solar_pegs
 from mani_skill_space.procgen.terrain import make_terrain
 
-REFERENCES = {"SampleCollection-v1": "PickCube-v1", "PegInHoleAssembly-v1": "PegInsertionSide-v1", "DebrisCapture-v1": "PickCube-v1", "SolarPanelAssembly-v1": "PegInsertionSide-v1"}
+REFERENCES = {
+    "SampleCollection-v1": "PickCube-v1",
+    "PegInHoleAssembly-v1": "PegInsertionSide-v1",
+    "DebrisCapture-v1": "PickCube-v1",
+    "SolarPanelAssembly-v1": "PegInsertionSide-v1",
+    "MultiSampleCollection-v1": "PickCube-v1",
+}
 """The ManiSkill task each of our envs is compared with."""
 
 
