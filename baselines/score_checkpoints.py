@@ -19,6 +19,8 @@ import tyro
 
 from mani_skill_space import eval as evaluation
 from mani_skill_space.learning.manifest import load_manifest
+from mani_skill_space.metrics import format_rate
+from mani_skill_space.protocol import condition_label
 from mani_skill_space.suites import Configuration, Suite
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,17 +57,13 @@ def markdown_table(rows: list[dict]) -> str:
     ]
     for row in rows:
         s = row["summary"]
-        kwargs = ", ".join(f"{k}={v}" for k, v in row["kwargs"].items())
+        kwargs = condition_label(row["kwargs"])
         seeds = f"{s['episodes']} ({row['seeds'][0]}-{row['seeds'][-1]})"
         lines.append(
-            f"| {row['name']} | {row['env_id']} | {kwargs} | {seeds} | {_rate(s['success_once'], s['success_once_ci95'])} "
-            f"| {_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {100 * row['manifest_success_at_end']:.0f}% |"
+            f"| {row['name']} | {row['env_id']} | {kwargs} | {seeds} | {format_rate(s['success_once'], s['success_once_ci95'], decimals=0)} "
+            f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'], decimals=0)} | {s['return_mean']:.2f} | {100 * row['manifest_success_at_end']:.0f}% |"
         )
     return "\n".join(lines)
-
-
-def _rate(rate: float, interval) -> str:
-    return f"{100 * rate:.0f}% [{100 * interval[0]:.0f}, {100 * interval[1]:.0f}]"
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
-from mani_skill_space.metrics import EpisodeResult, summarize
+from mani_skill_space.metrics import EpisodeResult, format_rate, summarize
 from mani_skill_space.policies import load_policy
 from mani_skill_space.protocol import Protocol, heat_map, load_protocol, markdown_matrix, matrix_row, protocol_suite
 from mani_skill_space.rollout import evaluation_env_kwargs, run_episode
@@ -205,14 +205,10 @@ def markdown_table(report: dict) -> str:
     for row in report["rows"]:
         s = row["summary"]
         lines.append(
-            f"| {row['configuration']} | {row['policy']} | {s['episodes']} | {_rate(s['success_once'], s['success_once_ci95'])} "
-            f"| {_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {s['episode_len_mean']:.1f} |"
+            f"| {row['configuration']} | {row['policy']} | {s['episodes']} | {format_rate(s['success_once'], s['success_once_ci95'])} "
+            f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {s['episode_len_mean']:.1f} |"
         )
     return "\n".join(lines)
-
-
-def _rate(rate: float, interval) -> str:
-    return f"{100 * rate:.1f}% [{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
 
 
 def _slug(name: str) -> str:

@@ -34,6 +34,11 @@ def wilson_interval(successes: int, trials: int, z: float = 1.959963984540054) -
     return max(0.0, centre - half_width), min(1.0, centre + half_width)
 
 
+def format_rate(rate: float, interval, decimals: int = 1) -> str:
+    """A rate with its interval in percent, as the result tables print it: ``62.0% [52.2, 70.9]``."""
+    return f"{100 * rate:.{decimals}f}% [{100 * interval[0]:.{decimals}f}, {100 * interval[1]:.{decimals}f}]"
+
+
 def summarize(results: list[EpisodeResult]) -> dict:
     n = len(results)
     once = sum(r.success_once for r in results)

@@ -32,7 +32,8 @@ from typing import Any, Optional
 
 from mani_skill_space.envs import TASKS
 from mani_skill_space.kwarg_checks import KwargError
-from mani_skill_space.suites import SHIPPED_SUITES_PACKAGE, Configuration, Suite, SuiteError, check_env_kwargs
+from mani_skill_space.metrics import format_rate, wilson_interval
+from mani_skill_space.suites import SHIPPED_SUITES_PACKAGE, Configuration, Suite, SuiteError, check_env_kwargs, reject_unknown_keys
 
 PROTOCOL_KEYS = {"name", "description", "episodes", "seed_start", "train", "tests"}
 TRAIN_KEYS = {"env_id", "kwargs"}
@@ -143,8 +144,6 @@ def condition_label(kwargs: dict[str, Any]) -> str:
 def newcombe_interval(successes_a: int, trials_a: int, successes_b: int, trials_b: int, z: float = 1.959963984540054) -> tuple[float, float]:
     """95% interval for the difference of two independent proportions a - b (Newcombe 1998, method 10: the
     hybrid of the two Wilson score intervals)."""
-    from mani_skill_space.metrics import wilson_interval
-
     p_a, p_b = successes_a / trials_a, successes_b / trials_b
     low_a, high_a = wilson_interval(successes_a, trials_a, z)
     low_b, high_b = wilson_interval(successes_b, trials_b, z)
@@ -182,16 +181,12 @@ def markdown_matrix(matrix: dict) -> str:
         "|---|---|" + "---|" * len(columns),
     ]
     for row in matrix["rows"]:
-        cells = [_percent(row["cells"][c][metric], row["cells"][c][f"{metric}_ci95"]) for c in columns]
+        cells = [format_rate(row["cells"][c][metric], row["cells"][c][f"{metric}_ci95"], decimals=0) for c in columns]
         lines.append(f"| {row['policy']} | {row['label']} | " + " | ".join(cells) + " |")
     lines += ["", "| policy | " + " | ".join(f"gap: {c}" for c in columns[1:]) + " |", "|---|" + "---|" * (len(columns) - 1)]
     for row in matrix["rows"]:
         lines.append(f"| {row['policy']} | " + " | ".join(_points(row["gaps"][c]["gap"], row["gaps"][c]["ci95"]) for c in columns[1:]) + " |")
     return "\n".join(lines)
-
-
-def _percent(rate: float, interval) -> str:
-    return f"{100 * rate:.0f}% [{100 * interval[0]:.0f}, {100 * interval[1]:.0f}]"
 
 
 def _points(gap: float, interval) -> str:
@@ -235,6 +230,4 @@ def _positive(value: Any, where: str) -> int:
 def _reject_unknown(table: Any, allowed: set[str], where: str, what: str) -> None:
     if not isinstance(table, dict):
         raise SuiteError(f"{where}: expected a table")
-    for key in table:
-        if key not in allowed:
-            raise SuiteError(f"{where}: unknown {what} {key!r}; valid choices: {', '.join(sorted(allowed))}")
+    reject_unknown_keys(table, allowed, what, lambda key: where)

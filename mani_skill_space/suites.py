@@ -21,7 +21,7 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from mani_skill.envs.sapien_env import BaseEnv
 
@@ -96,7 +96,7 @@ def load_suite(path_or_name: str | Path) -> Suite:
     except tomllib.TOMLDecodeError as error:
         raise SuiteError(f"{path}: {error}") from None
     locate = _Locator(path, text)
-    _reject_unknown(data, SUITE_KEYS, locate, None, "suite key")
+    reject_unknown_keys(data, SUITE_KEYS, "suite key", lambda key: locate.where(None, key))
     default_episodes = _positive_int(data.get("episodes", 10), locate, None, "episodes")
     default_seed_start = _natural_int(data.get("seed_start", 0), locate, None, "seed_start")
     entries = data.get("configurations", [])
@@ -111,7 +111,7 @@ def load_suite(path_or_name: str | Path) -> Suite:
 
 
 def _configuration(entry: dict, index: int, locate: "_Locator", episodes: int, seed_start: int) -> Configuration:
-    _reject_unknown(entry, CONFIGURATION_KEYS, locate, index, "configuration key")
+    reject_unknown_keys(entry, CONFIGURATION_KEYS, "configuration key", lambda key: locate.where(index, key))
     env_id = entry.get("env_id")
     if env_id is None:
         raise SuiteError(f"{locate.where(index, None)}: configuration without env_id")
@@ -169,10 +169,12 @@ def _default_name(env_id: str, kwargs: dict) -> str:
     return env_id + "".join(f"/{value}" for value in kwargs.values())
 
 
-def _reject_unknown(table: dict, allowed: set[str], locate: "_Locator", index: Optional[int], what: str) -> None:
+def reject_unknown_keys(table: dict, allowed: set[str], what: str, where: Callable[[str], str]) -> None:
+    """A ``SuiteError`` for the first key of ``table`` not in ``allowed``, located by ``where(key)``, naming the valid
+    choices (suites and protocols)."""
     for key in table:
         if key not in allowed:
-            raise SuiteError(f"{locate.where(index, key)}: unknown {what} {key!r}; valid choices: {', '.join(sorted(allowed))}")
+            raise SuiteError(f"{where(key)}: unknown {what} {key!r}; valid choices: {', '.join(sorted(allowed))}")
 
 
 def _positive_int(value, locate: "_Locator", index: Optional[int], key: str) -> int:

@@ -3,13 +3,10 @@ import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
-from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, RestingPlacement, SpaceManipulationEnv, turned_about_z
-from mani_skill_space.envs.sample_collection import LIFT_BAND, RESTING_SPEED, SAMPLE_DROP_CLEARANCE, SAMPLE_X_RANGE
+from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, turned_about_z
+from mani_skill_space.envs.sample_collection import LIFT_BAND, RESTING_SPEED, SAMPLE_DROP_CLEARANCE, SAMPLE_X_RANGE, RoverWithSampleBin
 from mani_skill_space.envs.sample_collection import REWARD_TABLE as SINGLE_SAMPLE_TABLE
 from mani_skill_space.geometry import in_open_box, relative_pose, rotation_6d, rotation_matrix
-from mani_skill_space.procgen.mounts import make_rover
-from mani_skill_space.procgen.rock import make_rock
 from mani_skill_space.rewards import RewardTable, RewardTerm, band_distance
 
 SAMPLE_COUNT = 3
@@ -32,7 +29,7 @@ REWARD_TABLE = RewardTable(
 
 
 @register_env("MultiSampleCollection-v1", max_episode_steps=450)
-class MultiSampleCollectionEnv(SpaceManipulationEnv):
+class MultiSampleCollectionEnv(RoverWithSampleBin, SpaceManipulationEnv):
     """
     **Task Description:**
     Sample Collection with three samples: a Panda arm on a planetary rover picks three geological samples (rocks,
@@ -67,25 +64,14 @@ class MultiSampleCollectionEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
     SUPPORTS_OBJECT_SCALE = True
 
-    def _make_mount(self):
-        return make_rover()
-
     def _load_scene(self, options: dict):
         self._load_domain_scene()
         self.samples, self._placements = [], []
         for i in range(SAMPLE_COUNT):
-            seeds = self._asset_seeds()
-            if self.asset_source == "procedural":
-                assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
-            else:
-                assets = [load_dataset_object("sample_tube")] * self.num_envs
-            assets = [self.factors.scaled(asset) for asset in assets]
+            assets = self._sample_assets()
             self.samples.append(self.build_graspable(assets, f"sample_{i}"))
-            exclude_axis = np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None
-            self._placements.append(RestingPlacement(assets, self.device, exclude_axis=exclude_axis))
-        bin_frame = self.mount.frames["bin"]
-        self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
-        self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
+            self._placements.append(self._sample_placement(assets))
+        self._load_bin()
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
@@ -106,12 +92,6 @@ class MultiSampleCollectionEnv(SpaceManipulationEnv):
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)
         self._sample_start_height = torch.zeros((self.num_envs, SAMPLE_COUNT), device=self.device)
-
-    @property
-    def bin_target(self) -> torch.Tensor:
-        """Centre of the bin's inner volume, world frame, (num_envs, 3)."""
-        centre = self._bin_floor + torch.tensor([0.0, 0.0, 1.0], device=self.device) * self._bin_half_size[2]
-        return centre.expand(self.num_envs, 3)
 
     def sample_positions(self) -> torch.Tensor:
         """(num_envs, 3 samples, 3)."""

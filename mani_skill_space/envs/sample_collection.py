@@ -30,8 +30,42 @@ REWARD_TABLE = RewardTable(
 )
 
 
+class RoverWithSampleBin:
+    """What Sample Collection and Multi-Sample Collection share: the rover, the samples' assets, the cargo bin."""
+
+    def _make_mount(self):
+        return make_rover()
+
+    def _sample_assets(self) -> list:
+        """One sample per env for this rebuild: a procedural rock of the domain's flavour from the next asset seeds
+        (drawn for the sealed tube too, so that every source advances the level's RNG alike), scaled by the
+        ``object_scale`` factor."""
+        seeds = self._asset_seeds()
+        if self.asset_source == "procedural":
+            assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
+        else:
+            assets = [load_dataset_object("sample_tube")] * self.num_envs
+        return [self.factors.scaled(asset) for asset in assets]
+
+    def _sample_placement(self, assets: list) -> RestingPlacement:
+        # a tube lies flat: it never rests on its end caps
+        exclude_axis = np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None
+        return RestingPlacement(assets, self.device, exclude_axis=exclude_axis)
+
+    def _load_bin(self):
+        bin_frame = self.mount.frames["bin"]
+        self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
+        self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
+
+    @property
+    def bin_target(self) -> torch.Tensor:
+        """Centre of the bin's inner volume, world frame, (num_envs, 3)."""
+        centre = self._bin_floor + torch.tensor([0.0, 0.0, 1.0], device=self.device) * self._bin_half_size[2]
+        return centre.expand(self.num_envs, 3)
+
+
 @register_env("SampleCollection-v1", max_episode_steps=150)
-class SampleCollectionEnv(SpaceManipulationEnv):
+class SampleCollectionEnv(RoverWithSampleBin, SpaceManipulationEnv):
     """
     **Task Description:**
     A Panda arm mounted on a planetary rover picks a geological sample (a rock, or a sealed sample tube) off
@@ -65,23 +99,12 @@ class SampleCollectionEnv(SpaceManipulationEnv):
     REWARD_TABLE = REWARD_TABLE
     SUPPORTS_OBJECT_SCALE = True
 
-    def _make_mount(self):
-        return make_rover()
-
     def _load_scene(self, options: dict):
         self._load_domain_scene()
-        seeds = self._asset_seeds()
-        if self.asset_source == "procedural":
-            assets = [make_rock(seed, self.domain.rock_flavour) for seed in seeds]
-        else:
-            assets = [load_dataset_object("sample_tube")] * self.num_envs
-        assets = [self.factors.scaled(asset) for asset in assets]
+        assets = self._sample_assets()
         self.sample = self.build_graspable(assets, "sample")
-        # a tube lies flat: it never rests on its end caps
-        self._placement = RestingPlacement(assets, self.device, exclude_axis=np.array([1.0, 0.0, 0.0]) if self.asset_source == "dataset" else None)
-        bin_frame = self.mount.frames["bin"]
-        self._bin_floor = torch.as_tensor(bin_frame[:3, 3], dtype=torch.float32, device=self.device)
-        self._bin_half_size = torch.as_tensor(self.mount.info["bin_inner_half_size"], dtype=torch.float32, device=self.device)
+        self._placement = self._sample_placement(assets)
+        self._load_bin()
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
@@ -100,12 +123,6 @@ class SampleCollectionEnv(SpaceManipulationEnv):
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)
         self._sample_start_height = torch.zeros(self.num_envs, device=self.device)
-
-    @property
-    def bin_target(self) -> torch.Tensor:
-        """Centre of the bin's inner volume, world frame, (num_envs, 3)."""
-        centre = self._bin_floor + torch.tensor([0.0, 0.0, 1.0], device=self.device) * self._bin_half_size[2]
-        return centre.expand(self.num_envs, 3)
 
     def evaluate(self):
         is_in_bin = in_open_box(self.sample.pose.p, self._bin_floor, self._bin_half_size)

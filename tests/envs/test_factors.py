@@ -24,18 +24,13 @@ def _vertices(env) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def reset_with():
-    envs = []
-
+def reset_with(make_sample_collection):
     def _reset_with(**kwargs):
-        env = gym.make("SampleCollection-v1", obs_mode="state", render_backend="none", **kwargs)
+        env = make_sample_collection(**kwargs)
         env.reset(seed=11)
-        envs.append(env)
         return env
 
-    yield _reset_with
-    for env in envs:
-        env.close()
+    return _reset_with
 
 
 def test_defaults_change_nothing_and_object_shifts_change_only_the_object(reset_with):

@@ -4,7 +4,6 @@ import hashlib
 import subprocess
 import sys
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import sapien
@@ -38,17 +37,8 @@ def scene_digest(env) -> str:
 
 
 @pytest.fixture(scope="module")
-def make():
-    envs = []
-
-    def _make(**kwargs):
-        env = gym.make("SampleCollection-v1", obs_mode="state", render_backend="none", **kwargs)
-        envs.append(env)
-        return env
-
-    yield _make
-    for env in envs:
-        env.close()
+def make(make_sample_collection):
+    return make_sample_collection
 
 
 def test_one_level_gives_the_same_scene_for_any_episode_seed_and_its_own_episode_randomness(make):
