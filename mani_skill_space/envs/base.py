@@ -61,6 +61,11 @@ ARM_CONTACT_LIMIT = 10.0
 WRIST_CAMERA_EYE = (0.1, 0.0, -0.07)
 WRIST_CAMERA_TARGET = (0.0, 0.0, 0.12)
 """Wrist camera in the TCP frame (z = approach direction): beside the hand, looking past the fingertips."""
+FULL_COLLECTION_EVERY = 8
+"""On physx_cpu a scene rebuild runs Python's full garbage collection once every this many rebuilds, not at every
+one: ManiSkill's ``_clear`` forces it to hand GPU memory back at once, and in a process with torch loaded it costs
+about three times the rest of the rebuild (a procedural env rebuilds at every episode). The old scenes' cycles
+wait at most this many rebuilds (the memory stays flat: ``tests/envs/test_rebuild_memory.py``)."""
 DEFAULT_CONTROL_MODE = "pd_ee_delta_pose"
 """The control mode an env gets when none is given (also for ``control_mode=None``, which ManiSkill's tools pass)."""
 DEFAULT_QPOS_NOISE = 0.02
@@ -323,6 +328,27 @@ class SpaceManipulationEnv(BaseEnv):
         self._wrist_link_index = int(torch.as_tensor(gripper.joints[0].parent_link.index).flatten()[0])
         self._action_line = DelayLine(self.num_envs, self.action_delay, self.device) if self.action_delay.active else None
         self._observation_line = DelayLine(self.num_envs, self.observation_delay, self.device) if self.observation_delay.active else None
+
+    def _clear(self):
+        """ManiSkill's ``_clear`` (drop the scene, agent, sensors), with its full garbage collection only on the GPU
+        simulator, on ``close`` and at every ``FULL_COLLECTION_EVERY``-th rebuild on the CPU."""
+        self._rebuilds_since_collection = getattr(self, "_rebuilds_since_collection", 0) + 1
+        on_gpu = self.backend.sim_backend != "physx_cpu"
+        if on_gpu or getattr(self, "_closing", False) or self._rebuilds_since_collection >= FULL_COLLECTION_EVERY:
+            self._rebuilds_since_collection = 0
+            super()._clear()
+            return
+        # ManiSkill 3.0.1's BaseEnv._clear without its gc.collect()
+        self._close_viewer()
+        self.agent = None
+        self._sensors = dict()
+        self._human_render_cameras = dict()
+        self.scene = None
+        self._hidden_objects = []
+
+    def close(self):
+        self._closing = True
+        super().close()
 
     # ------------------------------------------------------------------ communication delay
     def reset(self, seed=None, options=None):
