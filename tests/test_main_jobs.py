@@ -23,7 +23,7 @@ def test_showcase_writes_a_picture_grid_and_a_video_per_domain(tmp_path, capsys)
 
 
 def test_bench_prints_a_table_with_ratios_against_maniskill(capsys):
-    report = bench.main(bench.Args(obs_modes=("state",), steps=5, rounds=1, reconfigures=1, asset_repeats=1))
+    report = bench.main(bench.Args(obs_modes=("state",), steps=5, rounds=1, reconfigures=1, asset_repeats=1, vector_workers=0))
     names = [row.name for row in report.rows]
     assert any("env.step" in n for n in names) and any("reconfigure" in n for n in names)
     assert all(row.reference_name == bench.REFERENCES[row.name.split()[0]] and row.ours > 0 and row.reference > 0 for row in report.rows)
@@ -31,6 +31,13 @@ def test_bench_prints_a_table_with_ratios_against_maniskill(capsys):
     assert {"rock (lunar)", "rock (martian)", "terrain (moon)", "rover", "peg and hole pair (procedural)"} <= set(report.assets_ms)
     table = capsys.readouterr().out
     assert "| SampleCollection-v1 env.step/s (state) |" in table and "x |" in table
+
+
+def test_bench_vector_row_steps_two_spawned_workers_of_ours_and_of_the_reference():
+    args = bench.Args(env_ids=("SampleCollection-v1",), obs_modes=("state",), steps=3, rounds=1, reconfigures=1, asset_repeats=1, vector_workers=2)
+    (row,) = [row for row in bench.main(args).rows if "AsyncVectorEnv" in row.name]
+    assert row.name.startswith("SampleCollection-v1 AsyncVectorEnv x2") and row.reference_name == "PickCube-v1"
+    assert row.ours > 0 and row.reference > 0
 
 
 def test_procedural_variety_picture_has_a_panel_per_kind_and_differs_by_seed():

@@ -29,7 +29,7 @@ class VectorEnv:
             self.env = ManiSkillVectorEnv(gym.make(env_id, num_envs=num_envs, sim_backend="physx_cuda", **kwargs), num_envs, ignore_terminations=False, record_metrics=False)
         else:
             self.env = gym.vector.AsyncVectorEnv(
-                [_SingleEnvFactory(env_id, kwargs) for _ in range(num_envs)], context="spawn", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
+                [CPUEnvFactory(env_id, kwargs) for _ in range(num_envs)], context="spawn", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
             )
         self.single_action_space = self.env.single_action_space
 
@@ -63,7 +63,7 @@ class VectorEnv:
         self.env.close()
 
 
-class _SingleEnvFactory:
+class CPUEnvFactory:
     """Picklable constructor of one CPU env for a spawned worker."""
 
     def __init__(self, env_id: str, kwargs: dict):
