@@ -44,6 +44,7 @@ REFERENCES = {
     "DebrisCapture-v1": "PickCube-v1",
     "SolarPanelAssembly-v1": "PegInsertionSide-v1",
     "MultiSampleCollection-v1": "PickCube-v1",
+    "MultiPegInHoleAssembly-v1": "PegInsertionSide-v1",
 }
 """The ManiSkill task each of our envs is compared with."""
 

@@ -32,6 +32,14 @@ def test_oracle_collects_three_samples(domain, asset_source, seed):
     assert result.success_once and result.success_at_end, (domain, asset_source, seed, result.failure)
 
 
+@pytest.mark.parametrize("domain, asset_source, seed", [("moon", "dataset", 70000), ("orbit", "dataset", 70000), ("moon", "procedural", 70003)])
+def test_oracle_fills_four_holes(domain, asset_source, seed):
+    env = gym.make("MultiPegInHoleAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("MultiPegInHoleAssembly-v1"), seed)
+    env.close()
+    assert result.success_once and result.success_at_end, (domain, asset_source, seed, result.failure)
+
+
 def test_oracle_gives_the_same_episode_for_the_same_seed():
     env = gym.make("SampleCollection-v1", control_mode="pd_joint_pos", render_backend="none")
     first = run_episode(env, oracle_for("SampleCollection-v1"), 3)

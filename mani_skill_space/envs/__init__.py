@@ -4,6 +4,7 @@ from mani_skill.utils.registration import REGISTERED_ENVS
 
 from mani_skill_space.envs.base import SpaceManipulationEnv
 from mani_skill_space.envs.debris_capture import DebrisCaptureEnv
+from mani_skill_space.envs.multi_peg_in_hole_assembly import MultiPegInHoleAssemblyEnv
 from mani_skill_space.envs.multi_sample_collection import MultiSampleCollectionEnv
 from mani_skill_space.envs.peg_in_hole_assembly import PegInHoleAssemblyEnv
 from mani_skill_space.envs.sample_collection import SampleCollectionEnv
@@ -15,6 +16,7 @@ TASKS: dict[str, type[SpaceManipulationEnv]] = {
     "DebrisCapture-v1": DebrisCaptureEnv,
     "SolarPanelAssembly-v1": SolarPanelAssemblyEnv,
     "MultiSampleCollection-v1": MultiSampleCollectionEnv,
+    "MultiPegInHoleAssembly-v1": MultiPegInHoleAssemblyEnv,
 }
 
 
@@ -26,4 +28,4 @@ def task_class(env_id: str) -> type[SpaceManipulationEnv]:
     return TASKS[env_id]
 
 
-__all__ = ["DebrisCaptureEnv", "MultiSampleCollectionEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SolarPanelAssemblyEnv", "SpaceManipulationEnv", "TASKS", "task_class"]
+__all__ = ["DebrisCaptureEnv", "MultiPegInHoleAssemblyEnv", "MultiSampleCollectionEnv", "PegInHoleAssemblyEnv", "SampleCollectionEnv", "SolarPanelAssemblyEnv", "SpaceManipulationEnv", "TASKS", "task_class"]

@@ -43,13 +43,13 @@ six draws is rejected: see ``reachable_peg_hole_pair``)."""
 REWARD_TABLE = RewardTable((*insertion_terms(), *PENALTY_TERMS))
 
 
-def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray) -> tuple[Asset, Asset]:
+def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray, module_position=MODULE_POSITION) -> tuple[Asset, Asset]:
     """The procedural pair of ``seed``, drawn again (from seeds derived from it, deterministically) while no
     resting face of its peg leaves it reachable for insertion (``envs.insertion.reachable_faces``) by an arm at
-    ``arm_base``. The hole's ``info["feasibility"]`` records the check: how many draws it took and how many faces
-    pass (the episode's peg lies on one of those)."""
+    ``arm_base`` with the module at ``module_position``. The hole's ``info["feasibility"]`` records the check: how
+    many draws it took and how many faces pass (the episode's peg lies on one of those)."""
     module = np.eye(4)
-    module[:3, 3] = MODULE_POSITION
+    module[:3, 3] = module_position
     for draw in range(MAX_PAIR_DRAWS):
         peg, hole = make_peg_hole_pair(redrawn_seed(seed, draw), clearance)
         faces = reachable_faces_of(peg, module @ hole.frames["bottom"], arm_base)

@@ -7,7 +7,7 @@ from typing import Union
 from mani_skill_space.oracles.base import Oracle, PlanningFailed
 from mani_skill_space.oracles.debris_capture import DebrisCaptureOracle
 from mani_skill_space.oracles.end_effector import CONTROL_MODE, EndEffectorDeltaPose
-from mani_skill_space.oracles.peg_in_hole import PegInHoleOracle
+from mani_skill_space.oracles.peg_in_hole import MultiPegInHoleOracle, PegInHoleOracle
 from mani_skill_space.oracles.sample_collection import MultiSampleCollectionOracle, SampleCollectionOracle
 from mani_skill_space.oracles.solar_panel import SolarPanelOracle
 
@@ -17,6 +17,7 @@ ORACLES: dict[str, type[Oracle]] = {
     "DebrisCapture-v1": DebrisCaptureOracle,
     "SolarPanelAssembly-v1": SolarPanelOracle,
     "MultiSampleCollection-v1": MultiSampleCollectionOracle,
+    "MultiPegInHoleAssembly-v1": MultiPegInHoleOracle,
 }
 
 

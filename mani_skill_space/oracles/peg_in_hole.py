@@ -1,6 +1,8 @@
-"""Oracle for PegInHoleAssembly-v1: the shared peg insertion (``oracles.insertion``) of the env's one peg, with
-the hole module as the planner's obstacle (the insertion leaves out the keep-out around the hole's axis, where the
-fingers go, only while it lowers the peg in)."""
+"""Oracles for PegInHoleAssembly-v1 and MultiPegInHoleAssembly-v1.
+
+PegInHoleAssembly-v1: the shared peg insertion (``oracles.insertion``) of the env's one peg, with the hole module as
+the planner's obstacle (the insertion leaves out the keep-out around the hole's axis, where the fingers go, only
+while it lowers the peg in). MultiPegInHoleAssembly-v1: the same insertion four times, one peg after the other."""
 
 from __future__ import annotations
 
@@ -8,8 +10,10 @@ from typing import Iterator
 
 import numpy as np
 
-from mani_skill_space.oracles.base import Oracle, surface_points
-from mani_skill_space.oracles.insertion import PegInserter, PegTarget
+from mani_skill_space.oracles.base import POINT_SPACING, Oracle, PlanningFailed, raised, surface_points
+from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget
+from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
+from mani_skill_space.oracles.solar_panel import PEG_MARGIN, RETREAT_DISTANCE, STILL_IN_FRACTION
 
 MODULE_MARGIN = 0.01
 """While taking the peg and carrying it over the hole, the planner keeps the arm this far (m) from the module:
@@ -26,3 +30,53 @@ class PegInHoleOracle(Oracle):
         wide_module = surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN)
         yield from PegInserter(self, reach_obstacles=wide_module).insert(target)
         yield from self.wait_for_success(20)
+
+
+MULTI_INSERTION_ORDER = (0, 3, 1, 2)
+"""Holes in the order they are filled: the outer ones first, so that the arm carrying a peg over an inner module
+has the standing pegs beside it, not in the way of its elbow."""
+MULTI_PEG_INSERTION = InsertionSettings(lift_height=SOLAR_PEG_LIFT_HEIGHT, relax_steps=6)
+"""Peg-in-Hole's insertion, but the peg is swung over the modules high enough for a long peg hanging from the
+hand to clear the pegs already standing (as in Solar Panel Assembly), and the push eases off before the peg is
+let go (in orbit a peg let go while pressed in springs back out)."""
+
+
+class MultiPegInHoleOracle(Oracle):
+    """Oracle for MultiPegInHoleAssembly-v1: Peg-in-Hole's insertion of each peg into its own hole in turn
+    (``MULTI_INSERTION_ORDER``), letting go of it and backing straight up before the next, with the modules and
+    the other pegs (those standing with a margin) as the planner's obstacles."""
+
+    path_check_step = 0.02
+    """Standing pegs are thin: a check at 20 points of a long swing can step over one."""
+
+    def plan(self, env) -> Iterator[np.ndarray]:
+        modules = [self._module_pose(env, i) for i in range(len(env.pegs))]
+        wide_modules = np.concatenate(
+            [surface_points(env.hole_assets[i][0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN) for i, module in enumerate(modules)]
+        )
+        for done, hole in enumerate(MULTI_INSERTION_ORDER):
+            standing = MULTI_INSERTION_ORDER[:done]
+            self.make_solver(env, obstacles=self._obstacles(env, modules, hole, standing))
+            yield from PegInserter(self, MULTI_PEG_INSERTION, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
+            yield from self.open_gently(8)
+            yield from self.screw_to(raised(self.tcp_pose(), RETREAT_DISTANCE), "retreat")
+            if float(env.evaluate()["pair_inserted_fraction"][0, hole, hole]) < STILL_IN_FRACTION:
+                raise PlanningFailed(f"peg {hole} did not stay in its hole")
+        yield from self.wait_for_success(20)
+
+    @staticmethod
+    def _module_pose(env, index: int) -> np.ndarray:
+        pose = np.eye(4)
+        pose[:3, 3] = env.hole_modules[index].pose.p[0].cpu().numpy()
+        return pose
+
+    @staticmethod
+    def _obstacles(env, modules: list, hole: int, standing: tuple) -> np.ndarray:
+        """The modules and the other pegs where they are now: those already in their holes with a margin (an open
+        finger must not knock one out), those still lying without (the hand reaches between them)."""
+        points = [surface_points(env.hole_assets[i][0], module) for i, module in enumerate(modules)]
+        for i, peg in enumerate(env.pegs):
+            if i != hole:
+                margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
+                points.append(surface_points(env.peg_assets[i][0], peg.pose.sp.to_transformation_matrix(), *margin))
+        return np.concatenate(points)

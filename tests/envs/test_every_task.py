@@ -14,8 +14,8 @@ from mani_skill.utils.registration import REGISTERED_ENVS
 import mani_skill_space
 from mani_skill_space.envs import TASKS, task_class
 
-EPISODE_SECONDS = {"SampleCollection-v1": 7.5, "PegInHoleAssembly-v1": 10.0, "DebrisCapture-v1": 10.0, "SolarPanelAssembly-v1": 50.0, "MultiSampleCollection-v1": 22.5}
-"""The reference's episode durations (Multi-Sample Collection: 7.5 s per sample, as issue 16 asks)."""
+EPISODE_SECONDS = {"SampleCollection-v1": 7.5, "PegInHoleAssembly-v1": 10.0, "DebrisCapture-v1": 10.0, "SolarPanelAssembly-v1": 50.0, "MultiSampleCollection-v1": 22.5, "MultiPegInHoleAssembly-v1": 40.0}
+"""The reference's episode durations (Multi-Sample Collection: 7.5 s per sample, Multi-Peg-in-Hole: 10 s per peg, as issue 16 asks)."""
 CONFIGURATIONS = [(env_id, domain, source) for env_id, cls in TASKS.items() for domain in cls.SUPPORTED_DOMAINS for source in cls.SUPPORTED_ASSET_SOURCES]
 
 
