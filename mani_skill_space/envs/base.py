@@ -43,6 +43,7 @@ from mani_skill_space.levels import LevelRange, check_level_kwargs
 from mani_skill_space.procgen.asset import Asset, look_at
 from mani_skill_space.procgen.peg_hole import DEFAULT_CLEARANCE, check_clearance
 from mani_skill_space.procgen.resting import resting_orientations
+from mani_skill_space.procgen.servicer import BUS_LINK, MOUNTS, check_servicer_mass
 from mani_skill_space.procgen.terrain import TERRAIN_HALF_EXTENT, make_flat_ground, make_terrain
 from mani_skill_space.rewards import RewardTable, RewardTerm, action_rate
 
@@ -94,6 +95,8 @@ class SpaceManipulationEnv(BaseEnv):
     REWARD_TABLE: ClassVar[RewardTable]
     SUPPORTS_OBJECT_SCALE: ClassVar[bool] = False
     """Whether ``object_scale`` applies (tasks whose object fits nothing it must be scaled with, e.g. a socket)."""
+    SUPPORTS_FREE_FLYER: ClassVar[bool] = False
+    """Whether ``mount="free_flyer"`` applies (in orbit: the arm on a free-floating servicer instead of the station)."""
 
     agent: Union[Panda, PandaWristCam]
 
@@ -118,6 +121,8 @@ class SpaceManipulationEnv(BaseEnv):
         action_delay: Union[None, int, tuple[int, int]] = None,
         observation_delay: Union[None, int, tuple[int, int]] = None,
         delay_drift: float = 0.0,
+        mount: Optional[str] = None,
+        servicer_mass: Optional[float] = None,
         **kwargs,
     ):
         modes = {key: kwargs[key] for key in ("obs_mode", "reward_mode") if key in kwargs}
@@ -139,6 +144,8 @@ class SpaceManipulationEnv(BaseEnv):
             action_delay=action_delay,
             observation_delay=observation_delay,
             delay_drift=delay_drift,
+            mount=mount,
+            servicer_mass=servicer_mass,
             **modes,
         )
         self.domain = get_domain(checked["domain"], self.SUPPORTED_DOMAINS)
@@ -152,6 +159,9 @@ class SpaceManipulationEnv(BaseEnv):
         self.levels = np.zeros(num_envs, dtype=np.int64)
         """Each env's level (the seed of its scene's procedural content), drawn at every reconfiguration."""
         self._wrist_wrench_reading: Optional[torch.Tensor] = None
+        self.free_flyer = checked["mount"] == "free_flyer"
+        """The arm stands on a free-floating servicer (``mount="free_flyer"``), not on the station or rover."""
+        self.servicer_mass = checked["servicer_mass"]
         self.mount = self._make_mount()
         reconfiguration_freq = checked["reconfiguration_freq"]
         if reconfiguration_freq is None:
@@ -200,11 +210,31 @@ class SpaceManipulationEnv(BaseEnv):
         if checked["action_delay"].active and not holds_with_a_fixed_action(checked["control_mode"]):
             raise KwargError("action_delay", f"action_delay needs a control mode in which the steps before the first delayed action can hold still: a delta mode or pd_joint_pos, not {checked['control_mode']!r}")
         checked.update(check_factor_kwargs(kwargs, supports_object_scale=cls.SUPPORTS_OBJECT_SCALE, task=cls.__name__))
+        checked.update(cls._check_mount_kwargs(kwargs, checked["domain"]))
         if kwargs.get("obs_mode") is not None:
             checked["obs_mode"] = _checked_obs_mode(kwargs["obs_mode"])
         if kwargs.get("reward_mode") is not None:
             checked["reward_mode"] = checked_choice("reward_mode", kwargs["reward_mode"], cls.SUPPORTED_REWARD_MODES)
         return checked
+
+    @classmethod
+    def _check_mount_kwargs(cls, kwargs: dict, domain: str) -> dict[str, Any]:
+        """``mount`` ("fixed" by default, or "free_flyer": in orbit, for the tasks that support it) and
+        ``servicer_mass`` (kg, free flyer only)."""
+        mount = checked_choice("mount", kwargs.get("mount"), MOUNTS, MOUNTS[0])
+        if mount == "free_flyer":
+            if not cls.SUPPORTS_FREE_FLYER:
+                supporting = ", ".join(sorted(env.__name__ for env in _subclasses(SpaceManipulationEnv) if env.SUPPORTS_FREE_FLYER))
+                raise KwargError("mount", f"{cls.__name__} has no free-flying servicer; mount='free_flyer' applies to: {supporting}")
+            if domain != "orbit":
+                raise KwargError("mount", f"mount='free_flyer' floats only in orbit (domain='orbit'), not in domain {domain!r}")
+        elif kwargs.get("servicer_mass") is not None:
+            raise KwargError("servicer_mass", "servicer_mass is the free-flying servicer's mass: it needs mount='free_flyer'")
+        try:
+            mass = check_servicer_mass(kwargs.get("servicer_mass"))
+        except ValueError as error:
+            raise KwargError("servicer_mass", str(error)) from None
+        return dict(mount=mount, servicer_mass=mass)
 
     # ------------------------------------------------------------------ configuration
     @classmethod
@@ -228,8 +258,11 @@ class SpaceManipulationEnv(BaseEnv):
 
     @property
     def _default_sensor_configs(self):
+        base_camera = dict(pose=self._base_camera_pose())
+        if self.free_flyer:  # the base camera rides the servicer: its pose in the bus's frame (the arm's mount)
+            base_camera = dict(pose=Pose.create(sapien.Pose(self.mount.frames["arm_mount"]).inv()) * Pose.create(base_camera["pose"]), mount=self.agent.robot.links_map[BUS_LINK])
         return [
-            CameraConfig("base_camera", self._base_camera_pose(), SENSOR_SIZE, SENSOR_SIZE, np.deg2rad(90), 0.01, SENSOR_FAR),
+            CameraConfig("base_camera", width=SENSOR_SIZE, height=SENSOR_SIZE, fov=np.deg2rad(90), near=0.01, far=SENSOR_FAR, **base_camera),
             CameraConfig(
                 "wrist_camera",
                 sapien.Pose(look_at(WRIST_CAMERA_EYE, WRIST_CAMERA_TARGET, up=(1.0, 0.0, 0.0))),
@@ -265,13 +298,21 @@ class SpaceManipulationEnv(BaseEnv):
         raise NotImplementedError
 
     def _load_agent(self, options: dict):
-        super()._load_agent(options, sapien.Pose(self.mount.frames["arm_mount"]))
+        if not self.free_flyer:
+            super()._load_agent(options, sapien.Pose(self.mount.frames["arm_mount"]))
+            return
+        from mani_skill_space.envs.servicer import servicer_agent_class
+
+        # ManiSkill's _load_agent for one agent, with the arm on the servicer's free-floating bus
+        agent_class = servicer_agent_class(REGISTERED_AGENTS[self.robot_uids].agent_cls, self.servicer_mass)
+        self.agent = agent_class(self.scene, self._control_freq, self._control_mode, initial_pose=sapien.Pose(self.mount.frames["arm_mount"]))
 
     def _load_domain_scene(self):
         """Mount, sky, ground and the sun's direction for every env (call first in ``_load_scene``)."""
         self._graspable_radius: dict[str, float] = {}
         self._draw_levels()
-        self.mount_actor = build_asset_actor(self.scene, self.mount, "mount", body_type="static")
+        # a free-flying servicer leaves the station behind (its frames still place the arm, cameras and objects)
+        self.mount_actor = None if self.free_flyer else build_asset_actor(self.scene, self.mount, "mount", body_type="static")
         pitch = self.factors.sun_pitch_range
         self._sun_directions = [sample_sun_direction(np.random.default_rng(s), pitch_range_deg=pitch) for s in self._asset_seeds()]
         self._camera_offsets = camera_offsets(self._episode_seed, self.factors.camera_jitter)
@@ -311,6 +352,9 @@ class SpaceManipulationEnv(BaseEnv):
         qpos[:, self._gripper_joint_indices] = rest[self._gripper_joint_indices]
         self.agent.reset(qpos)
         self.agent.robot.set_pose(sapien.Pose(self.mount.frames["arm_mount"]))
+        if self.free_flyer:  # the servicer starts at rest
+            self.agent.robot.set_root_linear_velocity(torch.zeros((b, 3), device=self.device))
+            self.agent.robot.set_root_angular_velocity(torch.zeros((b, 3), device=self.device))
         self._previous_action[env_idx] = 0.0
         self._current_action[env_idx] = 0.0
 
@@ -468,8 +512,16 @@ class SpaceManipulationEnv(BaseEnv):
         """Observations every task shares; tasks extend this with ``super()._get_obs_extra(info)``."""
         return self._shared_obs_extra(*self.tcp_frame())
 
+    def arm_base_frame(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """World position (n, 3) and rotation (n, 3, 3) of the arm's base: fixed on the station or rover, the
+        servicer bus's moving frame (the centre of its top face) on a free flyer."""
+        if not self.free_flyer:
+            return self._arm_base_position, self._arm_base_rotation
+        pose = self.agent.robot.pose
+        return pose.p, rotation_matrix(pose.q)
+
     def _shared_obs_extra(self, tcp_position: torch.Tensor, tcp_rotation: torch.Tensor) -> dict[str, torch.Tensor]:
-        position, rotation = relative_pose(self._arm_base_position, self._arm_base_rotation, tcp_position, tcp_rotation)
+        position, rotation = relative_pose(*self.arm_base_frame(), tcp_position, tcp_rotation)
         obs = dict(
             tcp_pos=position,
             tcp_rot6d=rotation_6d(rotation),
@@ -478,6 +530,14 @@ class SpaceManipulationEnv(BaseEnv):
         )
         if self.obs_mode_struct.use_state:
             obs["wrist_wrench"] = self.wrist_wrench()
+            if self.free_flyer:  # where the servicer has drifted and turned from its start, and how fast
+                robot = self.agent.robot
+                obs.update(
+                    servicer_pos=robot.pose.p - self._arm_base_position,
+                    servicer_quat=robot.pose.q,
+                    servicer_linear_velocity=robot.root_linear_velocity,
+                    servicer_angular_velocity=robot.root_angular_velocity,
+                )
         return obs
 
     def gripper_opening(self) -> torch.Tensor:
@@ -618,6 +678,10 @@ def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     half = yaw / 2
     zeros = torch.zeros_like(half)
     return quaternion_multiply(torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1), quaternion)
+
+
+def _subclasses(cls: type) -> list[type]:
+    return [sub for direct in cls.__subclasses__() for sub in (direct, *_subclasses(direct))]
 
 
 def socket_clearance(clearance: Any, asset_source: str, check: Callable[[Any], float] = check_clearance) -> float:

@@ -88,6 +88,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
     DEFAULT_DOMAIN = "orbit"
     EPISODE_SECONDS = 10.0
     REWARD_TABLE = REWARD_TABLE
+    SUPPORTS_FREE_FLYER = True
     SUPPORTS_OBJECT_SCALE = True
 
     def __init__(self, *args, difficulty: float = 1.0, **kwargs):

@@ -101,6 +101,7 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     DEFAULT_DOMAIN = "moon"
     EPISODE_SECONDS = 10.0
     REWARD_TABLE = REWARD_TABLE
+    SUPPORTS_FREE_FLYER = True
 
     def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
         self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]

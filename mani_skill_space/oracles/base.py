@@ -28,6 +28,10 @@ HALF_TURN_ABOUT_APPROACH = np.array([0.0, 0.0, 0.0, 1.0])
 TCP_RAMP_STEPS = 5
 """Steps over which an oracle with a ``tcp_pace`` speeds up to it (and slows down from it)."""
 SURFACE_POINTS_PER_PART = 256
+FREE_FLYER_CORRECTIONS = 3
+FREE_FLYER_TOLERANCE = 0.003
+"""m: on a free-flying servicer a screw motion is followed by up to this many corrections, planned from where the bus
+has drifted, until the TCP is this close to its goal."""
 POINT_SPACING = 0.02
 """About one obstacle point per 2 x 2 cm of surface: no arm link fits between them."""
 GROUND_REACH = 1.0
@@ -86,7 +90,8 @@ class Oracle(Policy):
     def make_solver(self, env, obstacles: Optional[np.ndarray] = None) -> PandaArmMotionPlanningSolver:
         """ManiSkill's Panda planner at the arm's mount, aware of the static mount (rover, bin, ...), the ground
         and any ``obstacles`` points (world frame)."""
-        solver = PandaArmMotionPlanningSolver(
+        solver_class = _ServicerArmSolver if getattr(env, "free_flyer", False) else PandaArmMotionPlanningSolver
+        solver = solver_class(
             env,
             debug=False,
             vis=False,
@@ -96,7 +101,9 @@ class Oracle(Policy):
             joint_vel_limits=JOINT_VELOCITY_LIMIT,
             joint_acc_limits=JOINT_ACCELERATION_LIMIT,
         )
-        points = _surface_points(env.mount, np.random.default_rng(0))
+        # what the arm stands on: the mount (rover, station); a free-flying servicer's bus moves with the arm, so
+        # points fixed where it was would soon stand inside it (the arm never reaches back under its own base)
+        points = np.zeros((0, 3)) if getattr(env, "free_flyer", False) else _surface_points(env.mount, np.random.default_rng(0))
         # the surface the arm stands on (ground or the station's platform) is a grid a little below it, so that
         # the fingers may touch it but no link is planned into it
         points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()])
@@ -130,12 +137,25 @@ class Oracle(Policy):
         """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
         collision-free IK solution) at ``speed`` times the usual joint limits (and ``acceleration`` times the
         usual accelerations, on top); ``settle_steps`` more steps hold the goal so the arm catches up."""
-        with self._speed(speed, acceleration):
-            positions = self._screw_path(self.arm_qpos(), pose)
-            if positions is None:
-                positions = self._joint_path(pose, what)
-        yield from self._follow(positions)
+        # on a free-flying servicer the motion moves the bus, so the hand ends off the goal by the bus's drift:
+        # a few shorter motions planned from where the bus is then close in on it
+        corrections = FREE_FLYER_CORRECTIONS if getattr(self.env, "free_flyer", False) else 0
+        for correction in range(1 + corrections):
+            if correction and np.linalg.norm(self.tcp_pose().p - pose.p) < FREE_FLYER_TOLERANCE:
+                break
+            with self._speed(speed, acceleration):
+                positions = self._screw_path(self.arm_qpos(), pose)
+                if positions is None:
+                    positions = self._joint_path(pose, what)
+            yield from self._follow(positions)
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
+
+    def _plan_from_the_base_now(self) -> None:
+        """On a free-flying servicer, plan from the bus's pose now (it moves as the arm does)."""
+        if getattr(self.env, "free_flyer", False):
+            base = self.env.agent.robot.pose.sp
+            self.solver.base_pose = base
+            self.solver.planner.set_base_pose(np.hstack([base.p, base.q]))
 
     @contextmanager
     def obstacles_only(self, choose: Callable[[np.ndarray], np.ndarray]):
@@ -201,6 +221,7 @@ class Oracle(Policy):
     def ik_solutions(self, pose: sapien.Pose, near: Optional[np.ndarray] = None) -> list[np.ndarray]:
         """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to ``near`` (the current
         arm joints by default) first."""
+        self._plan_from_the_base_now()
         planner = self.solver.planner
         target = self.solver.base_pose.inv() * pose
         goal = np.concatenate([target.p, target.q])
@@ -218,6 +239,7 @@ class Oracle(Policy):
 
     def _screw_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Joint positions of a collision-free screw motion of the TCP from ``start`` to ``pose``, if any."""
+        self._plan_from_the_base_now()
         planner = self.solver.planner
         try:
             result = planner.plan_screw(
@@ -282,6 +304,7 @@ class Oracle(Policy):
         planner = self.solver.planner
         command = self.hold_action()
         for step in range(steps):
+            self._plan_from_the_base_now()
             goal = self.solver.base_pose.inv() * target(step)
             status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(self.arm_qpos()), n_init_qpos=1)
             if status == "Success":
@@ -405,6 +428,30 @@ def _surface_points(asset, rng: np.random.Generator, margin: float = 0.0, spacin
         points, faces = trimesh.sample.sample_surface(part.mesh, count, seed=rng)
         samples.append(points + margin * part.mesh.face_normals[faces])
     return np.concatenate(samples)
+
+
+class _ServicerArmSolver(PandaArmMotionPlanningSolver):
+    """ManiSkill's Panda planner for the arm on a free-flying servicer: it plans the arm alone (its own description,
+    without the bus link) from the bus's pose (``Oracle._plan_from_the_base_now``)."""
+
+    def setup_planner(self):
+        import mplib
+
+        from mani_skill_space.procgen.servicer import BUS_LINK
+
+        arm = self.env_agent.arm_urdf_path
+        planner = mplib.Planner(
+            urdf=arm,
+            srdf=arm.replace(".urdf", ".srdf"),
+            user_link_names=[link.get_name() for link in self.robot.get_links() if link.get_name() != BUS_LINK],
+            user_joint_names=[joint.get_name() for joint in self.robot.get_active_joints()],
+            move_group=getattr(self, "MOVE_GROUP", "eef"),
+        )
+        # as ManiSkill's setup_planner
+        planner.set_base_pose(np.hstack([self.base_pose.p, self.base_pose.q]))
+        planner.joint_vel_limits = np.asarray(planner.joint_vel_limits) * self.joint_vel_limits
+        planner.joint_acc_limits = np.asarray(planner.joint_acc_limits) * self.joint_acc_limits
+        return planner
 
 
 def _ground_points() -> np.ndarray:
