@@ -680,6 +680,26 @@ def turned_about_z(quaternion: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     return quaternion_multiply(torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1), quaternion)
 
 
+class SocketClearance:
+    """The ``clearance`` kwarg of the tasks whose procedural sockets are cut around their pegs (a mixin before
+    ``SpaceManipulationEnv``): checked by ``socket_clearance`` with the task's generator's ``CLEARANCE_CHECK``, kept
+    as ``self.clearance``."""
+
+    CLEARANCE_CHECK: ClassVar[Callable[[Any], float]] = staticmethod(check_clearance)
+
+    def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
+        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
+        super().__init__(*args, asset_source=asset_source, **kwargs)
+
+    @classmethod
+    def check_task_kwargs(cls, **kwargs) -> dict:
+        """The base class's checks, and ``clearance``: procedural sockets only, positive and at most what the
+        generator's sockets hold (``CLEARANCE_CHECK``)."""
+        checked = super().check_task_kwargs(**kwargs)
+        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], cls.CLEARANCE_CHECK)
+        return checked
+
+
 def _subclasses(cls: type) -> list[type]:
     return [sub for direct in cls.__subclasses__() for sub in (direct, *_subclasses(direct))]
 

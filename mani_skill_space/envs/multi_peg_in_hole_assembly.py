@@ -1,4 +1,3 @@
-from typing import Optional
 
 import numpy as np
 import sapien
@@ -7,7 +6,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
+from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
@@ -25,7 +24,6 @@ from mani_skill_space.envs.insertion import (
 from mani_skill_space.envs.peg_in_hole_assembly import MODULE_POSITION, PEG_DISTANCE, reachable_peg_hole_pair
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import check_clearance
 from mani_skill_space.rewards import RewardTable, RewardTerm
 
 PAIR_COUNT = 4
@@ -51,7 +49,7 @@ def module_positions() -> np.ndarray:
 
 
 @register_env("MultiPegInHoleAssembly-v1", max_episode_steps=800)
-class MultiPegInHoleAssemblyEnv(SpaceManipulationEnv):
+class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     """
     **Task Description:**
     Peg-in-Hole with four pairs: four pegs lie in front of a row of four hole modules, one in front of each; put
@@ -89,17 +87,6 @@ class MultiPegInHoleAssemblyEnv(SpaceManipulationEnv):
     DEFAULT_DOMAIN = "moon"
     EPISODE_SECONDS = 10.0 * PAIR_COUNT
     REWARD_TABLE = REWARD_TABLE
-
-    def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
-        super().__init__(*args, asset_source=asset_source, **kwargs)
-
-    @classmethod
-    def check_task_kwargs(cls, **kwargs) -> dict:
-        """The base class's checks, and ``clearance`` as in Peg-in-Hole (procedural holes only, in (0, 7 mm])."""
-        checked = super().check_task_kwargs(**kwargs)
-        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], check_clearance)
-        return checked
 
     def _make_mount(self):
         return make_rover(cargo_bin=False) if self.domain.has_ground else make_station()

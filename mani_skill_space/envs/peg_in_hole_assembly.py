@@ -1,4 +1,3 @@
-from typing import Optional
 
 import numpy as np
 import sapien
@@ -7,7 +6,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
+from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     PEG_DROP_CLEARANCE,
@@ -26,7 +25,7 @@ from mani_skill_space.envs.insertion import (
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import check_clearance, make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.rewards import RewardTable
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
@@ -60,7 +59,7 @@ def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray, m
 
 
 @register_env("PegInHoleAssembly-v1", max_episode_steps=200)
-class PegInHoleAssemblyEnv(SpaceManipulationEnv):
+class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     """
     **Task Description:**
     Pick up a peg lying in front of a hole module and insert it into the hole. On the Moon, Mars and Earth the
@@ -102,17 +101,6 @@ class PegInHoleAssemblyEnv(SpaceManipulationEnv):
     EPISODE_SECONDS = 10.0
     REWARD_TABLE = REWARD_TABLE
     SUPPORTS_FREE_FLYER = True
-
-    def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
-        super().__init__(*args, asset_source=asset_source, **kwargs)
-
-    @classmethod
-    def check_task_kwargs(cls, **kwargs) -> dict:
-        """The base class's checks, and ``clearance``: procedural holes only, in (0, 7 mm] (``peg_hole.MAX_CLEARANCE``)."""
-        checked = super().check_task_kwargs(**kwargs)
-        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], check_clearance)
-        return checked
 
     def _make_mount(self):
         return make_rover() if self.domain.has_ground else make_station()

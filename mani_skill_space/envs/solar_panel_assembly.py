@@ -1,4 +1,3 @@
-from typing import Optional
 
 import numpy as np
 import sapien
@@ -8,7 +7,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv, socket_clearance
+from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
@@ -97,7 +96,7 @@ def reachable_solar_set(seed: int, clearance: float, arm_base: np.ndarray) -> tu
 
 
 @register_env("SolarPanelAssembly-v1", max_episode_steps=1000)
-class SolarPanelAssemblyEnv(SpaceManipulationEnv):
+class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     """
     **Task Description:**
     Insert four pegs lying in front of the arm into four sockets (two long pegs in the nearer sockets, two short
@@ -146,17 +145,7 @@ class SolarPanelAssemblyEnv(SpaceManipulationEnv):
     EPISODE_SECONDS = 50.0
     REWARD_TABLE = REWARD_TABLE
 
-    def __init__(self, *args, clearance: Optional[float] = None, asset_source: Optional[str] = None, **kwargs):
-        self.clearance = self.check_task_kwargs(clearance=clearance, asset_source=asset_source)["clearance"]
-        super().__init__(*args, asset_source=asset_source, **kwargs)
-
-    @classmethod
-    def check_task_kwargs(cls, **kwargs) -> dict:
-        """The base class's checks, and ``clearance``: procedural sockets only, in (0, 1.96 mm]
-        (``solar_panel.MAX_CLEARANCE``: wider bores leave the sharpest profiles' posts thinner walls than 3 mm)."""
-        checked = super().check_task_kwargs(**kwargs)
-        checked["clearance"] = socket_clearance(kwargs.get("clearance"), checked["asset_source"], check_socket_clearance)
-        return checked
+    CLEARANCE_CHECK = staticmethod(check_socket_clearance)
 
     def _make_mount(self):
         return make_rover(cargo_bin=False) if self.domain.has_ground else make_station()
