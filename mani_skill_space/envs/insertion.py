@@ -71,6 +71,24 @@ def latch_force(engaged: torch.Tensor, into_seat: torch.Tensor, velocity: torch.
     return torch.where(engaged[..., None], force, torch.zeros_like(force))
 
 
+def seated_pairs(insertion: "PegInsertion", measures: dict[str, torch.Tensor], fits: torch.Tensor) -> torch.Tensor:
+    """(n, pegs, holes) from ``all_pair_measures``: the peg is inserted in the hole and aligned with it, and ``fits``
+    (pegs, holes) says that peg may count in that hole."""
+    return is_inserted(measures, insertion.peg_radius[:, :, None]) & is_aligned(measures) & fits
+
+
+def pegs_latched_in_holes(pegs, masses, seated: torch.Tensor, hole_bottoms: torch.Tensor) -> list:
+    """The latch forces ``(peg, force)`` of every peg (its actor and mass (n,)) in the hole it is ``seated`` in
+    (``seated_pairs``), pulling it along that hole's axis into ``hole_bottoms`` (n, holes, 4, 4); zero where it is
+    in none."""
+    into_holes = -hole_bottoms[:, :, :3, 2]
+    rows = torch.arange(len(seated), device=seated.device)
+    return [
+        (peg, latch_force(seated[:, i].any(dim=1), into_holes[rows, seated[:, i].int().argmax(dim=1)], peg.linear_velocity, mass))
+        for i, (peg, mass) in enumerate(zip(pegs, masses))
+    ]
+
+
 def insertion_terms(prefix: str = "") -> tuple[RewardTerm, ...]:
     """Peg-in-Hole's dense terms (the reference's weights), each name prefixed with ``prefix``."""
     return (

@@ -14,12 +14,11 @@ from mani_skill_space.envs.insertion import (
     PegInsertion,
     insertion_inputs,
     insertion_terms,
-    is_aligned,
-    is_inserted,
-    latch_force,
     lying_peg_orientation,
     peg_placement,
+    pegs_latched_in_holes,
     reachable_faces,
+    seated_pairs,
 )
 from mani_skill_space.envs.peg_in_hole_assembly import MODULE_POSITION, PEG_DISTANCE, reachable_peg_hole_pair
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
@@ -161,20 +160,10 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
                 peg.set_pose(Pose.create_from_pq(position, quat))
                 self._peg_start_height[env_idx, i] = position[:, 2]
 
-    def _in_hole(self, measures: dict[str, torch.Tensor]) -> torch.Tensor:
-        """(n, pegs, holes): the peg is inserted in the hole, aligned, and fits it."""
-        return is_inserted(measures, self.insertion.peg_radius[:, :, None]) & is_aligned(measures) & self._fits
-
     def _latch_forces(self):
         """Each hole latches a peg inserted in it (see the card)."""
-        in_hole = self._in_hole(self.insertion.all_pair_measures(self.peg_end_frames()))
-        into_holes = -self.insertion.hole_bottom[:, :, :3, 2]
-        rows = torch.arange(self.num_envs, device=self.device)
-        forces = []
-        for i, peg in enumerate(self.pegs):
-            into = into_holes[rows, in_hole[:, i].int().argmax(dim=1)]
-            forces.append((peg, latch_force(in_hole[:, i].any(dim=1), into, peg.linear_velocity, self._peg_masses[i])))
-        return forces
+        in_hole = seated_pairs(self.insertion, self.insertion.all_pair_measures(self.peg_end_frames()), self._fits)
+        return pegs_latched_in_holes(self.pegs, self._peg_masses, in_hole, self.insertion.hole_bottom)
 
     # ------------------------------------------------------------------ measures
     def peg_end_frames(self) -> torch.Tensor:
@@ -185,7 +174,7 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
 
     def evaluate(self):
         measures = self.insertion.all_pair_measures(self.peg_end_frames())
-        in_hole = self._in_hole(measures)
+        in_hole = seated_pairs(self.insertion, measures, self._fits)
         hole_filled = in_hole.any(dim=1)
         holes_filled = hole_filled.sum(dim=1)
         grasped = torch.stack([self.is_grasping(peg) for peg in self.pegs], dim=1)

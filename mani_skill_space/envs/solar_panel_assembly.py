@@ -15,14 +15,14 @@ from mani_skill_space.envs.insertion import (
     PegInsertion,
     insertion_inputs,
     insertion_terms,
-    is_aligned,
-    is_inserted,
     latch_force,
     lying_peg_orientation,
     peg_placement,
+    pegs_latched_in_holes,
     reachable_faces,
     reachable_faces_of,
     redrawn_seed,
+    seated_pairs,
 )
 from mani_skill_space.geometry import pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
@@ -216,14 +216,8 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
 
     def _latch_forces(self):
         """Each socket latches a peg inserted in it, and the pegs' tops latch a seated panel (see the card)."""
-        measures = self.insertion.all_pair_measures(self.peg_end_frames())
-        in_socket = is_inserted(measures, self.insertion.peg_radius[:, :, None]) & is_aligned(measures) & self._fits
-        into_sockets = -self.insertion.hole_bottom[:, :, :3, 2]
-        forces = []
-        for i, peg in enumerate(self.pegs):
-            socket = in_socket[:, i].int().argmax(dim=1)
-            into = into_sockets[torch.arange(self.num_envs, device=self.device), socket]
-            forces.append((peg, latch_force(in_socket[:, i].any(dim=1), into, peg.linear_velocity, self._peg_masses[i])))
+        in_socket = seated_pairs(self.insertion, self.insertion.all_pair_measures(self.peg_end_frames()), self._fits)
+        forces = pegs_latched_in_holes(self.pegs, self._peg_masses, in_socket, self.insertion.hole_bottom)
         _, _, seated = self._seat_error()
         forces.append((self.panel, latch_force(seated, -self.panel_target[:, :3, 2], self.panel.linear_velocity, self._panel_mass)))
         return forces
@@ -274,7 +268,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
 
     def evaluate(self):
         measures = self.insertion.all_pair_measures(self.peg_end_frames())
-        in_socket = is_inserted(measures, self.insertion.peg_radius[:, :, None]) & is_aligned(measures) & self._fits
+        in_socket = seated_pairs(self.insertion, measures, self._fits)
         socket_filled = in_socket.any(dim=1)
         sockets_filled = socket_filled.sum(dim=1)
         all_filled = sockets_filled == SOCKET_COUNT
