@@ -93,6 +93,29 @@ def test_behaviour_cloning(demos, tmp_path):
     _score(checkpoint, tmp_path)
 
 
+def test_bc_balanced_action_loss_weighs_each_dimension_by_its_inverse_variance():
+    bc = _baseline("bc")
+    actions = torch.stack([torch.randn(1000) * 0.01, torch.randn(1000), torch.zeros(1000)], dim=1)
+    weights = bc.action_loss_weights(actions)
+    assert weights.mean().item() == pytest.approx(1.0)
+    ratio = (weights[0] / weights[1]).item()
+    assert ratio == pytest.approx((actions[:, 1].var() / actions[:, 0].var()).item(), rel=1e-4)  # 1e4: the small one counts
+    assert (weights[2] / weights[1]).item() == pytest.approx(actions[:, 1].var().item() / 1e-4, rel=1e-4)  # a constant one is capped
+
+
+@pytest.mark.parametrize("schedule", ["constant", "cosine"])
+def test_bc_learning_rate_schedule_follows_the_budget_that_ends_first(schedule):
+    bc = _baseline("bc")
+    args = bc.Args(demos=Path("unused.h5"), lr=1e-3, minutes=10.0, max_iterations=1000, lr_schedule=schedule)
+    optimiser = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=args.lr)
+    rates = []
+    for iteration, minutes in [(0, 0.0), (500, 1.0), (100, 5.0), (1000, 1.0), (10, 10.0)]:
+        bc.set_learning_rate(optimiser, args, iteration, minutes)
+        rates.append(optimiser.param_groups[0]["lr"])
+    expected = [1e-3] * 5 if schedule == "constant" else [1e-3, 5e-4, 5e-4, 0.0, 0.0]
+    assert rates == pytest.approx(expected, abs=1e-12)
+
+
 def test_diffusion_policy(demos, tmp_path):
     dp = _baseline("diffusion_policy")
     checkpoint = dp.main(dp.Args(demos=demos, max_iterations=60, eval_every=60, eval_episodes=0, batch_size=32, diffusion_steps=10, output_dir=tmp_path, name="dp"))
