@@ -22,7 +22,18 @@ from typing import Any, Callable, Generator, Iterator, Optional
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, at_height, backed_off, collision_vertices, lowest_point, open_finger_corners
+from mani_skill_space.oracles.base import (
+    GRIPPER_CLOSED,
+    POINT_SPACING,
+    Oracle,
+    PlanningFailed,
+    at_height,
+    backed_off,
+    collision_vertices,
+    lowest_point,
+    open_finger_corners,
+    surface_points,
+)
 
 PRE_GRASP_DISTANCE = 0.08
 PAD_REACH = 0.016
@@ -329,6 +340,24 @@ class PegInserter:
         """The TCP pose that puts the peg's end at ``tip_goal``, given how the hand holds the peg right now."""
         tip_in_tcp = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
         return sapien.Pose(tip_goal @ np.linalg.inv(tip_in_tcp))
+
+
+PEG_MARGIN = 0.01
+"""The arm keeps about this far (m) from the pegs already standing in their holes, sampled this densely: at the
+usual 2 cm spacing an open finger can pass between two points on a standing peg's top and knock it out of its
+socket. (Not around the pegs still lying on the deck: the hand must reach between them.)"""
+
+
+def other_pegs(pegs: list, peg_assets: list, held: int, standing) -> np.ndarray:
+    """Obstacle points of every peg but ``held``, where it is now: those ``standing`` in their holes with
+    ``PEG_MARGIN`` (an open finger must not knock one out), those still lying without (the hand reaches between
+    them)."""
+    points = []
+    for i, peg in enumerate(pegs):
+        if i != held:
+            margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
+            points.append(surface_points(peg_assets[i], peg.pose.sp.to_transformation_matrix(), *margin))
+    return np.concatenate(points)
 
 
 def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:

@@ -10,10 +10,10 @@ from typing import Iterator
 
 import numpy as np
 
-from mani_skill_space.oracles.base import POINT_SPACING, Oracle, PlanningFailed, raised, surface_points
-from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget
+from mani_skill_space.oracles.base import Oracle, PlanningFailed, raised, surface_points
+from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
-from mani_skill_space.oracles.solar_panel import PEG_MARGIN, RETREAT_DISTANCE, STILL_IN_FRACTION
+from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCE, STILL_IN_FRACTION
 
 MODULE_MARGIN = 0.01
 """While taking the peg and carrying it over the hole, the planner keeps the arm this far (m) from the module:
@@ -50,7 +50,9 @@ class MultiPegInHoleOracle(Oracle):
     """Standing pegs are thin: a check at 20 points of a long swing can step over one."""
 
     def plan(self, env) -> Iterator[np.ndarray]:
-        modules = [self._module_pose(env, i) for i in range(len(env.pegs))]
+        modules = [np.eye(4) for _ in env.pegs]
+        for module, position in zip(modules, env.module_positions):
+            module[:3, 3] = position
         wide_modules = np.concatenate(
             [surface_points(env.hole_assets[i][0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN) for i, module in enumerate(modules)]
         )
@@ -65,18 +67,8 @@ class MultiPegInHoleOracle(Oracle):
         yield from self.wait_for_success(20)
 
     @staticmethod
-    def _module_pose(env, index: int) -> np.ndarray:
-        pose = np.eye(4)
-        pose[:3, 3] = env.hole_modules[index].pose.p[0].cpu().numpy()
-        return pose
-
-    @staticmethod
     def _obstacles(env, modules: list, hole: int, standing: tuple) -> np.ndarray:
-        """The modules and the other pegs where they are now: those already in their holes with a margin (an open
-        finger must not knock one out), those still lying without (the hand reaches between them)."""
+        """The modules and the other pegs where they are now (``other_pegs``)."""
         points = [surface_points(env.hole_assets[i][0], module) for i, module in enumerate(modules)]
-        for i, peg in enumerate(env.pegs):
-            if i != hole:
-                margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
-                points.append(surface_points(env.peg_assets[i][0], peg.pose.sp.to_transformation_matrix(), *margin))
+        points.append(other_pegs(env.pegs, [assets[0] for assets in env.peg_assets], hole, standing))
         return np.concatenate(points)

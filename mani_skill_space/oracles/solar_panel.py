@@ -14,8 +14,8 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, POINT_SPACING, Oracle, PlanningFailed, backed_off, raised, surface_points
-from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
+from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs
 
 INSERTION_ORDER = (2, 3, 0, 1)
 """Sockets in the order they are filled: the farther (short) ones first."""
@@ -27,10 +27,6 @@ PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
 STILL_IN_FRACTION = 0.8
-PEG_MARGIN = 0.01
-"""The arm keeps about this far (m) from the pegs already standing in their sockets, sampled this densely: at the
-usual 2 cm spacing an open finger can pass between two points on a standing peg's top and knock it out of its
-socket. (Not around the pegs still lying on the deck: the hand must reach between them.)"""
 PANEL_PRE_GRASP = 0.1
 PANEL_LEVEL_ACROSS = 0.5
 """The bar's across direction must be at least this level (horizontal length of the unit vector) to be taken
@@ -90,11 +86,7 @@ class SolarPanelOracle(Oracle):
         base[:3, 3] = env.socket_base.pose.p[0].cpu().numpy()
         points = [surface_points(env.socket_assets[0], base)]
         standing = INSERTION_ORDER[: INSERTION_ORDER.index(exclude_peg)] if exclude_peg >= 0 else INSERTION_ORDER
-        for i, peg in enumerate(env.pegs):
-            if i != exclude_peg:
-                pose = peg.pose.sp.to_transformation_matrix()
-                margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
-                points.append(surface_points(env.peg_assets[0][i], pose, *margin))
+        points.append(other_pegs(env.pegs, env.peg_assets[0], exclude_peg, standing))
         if exclude_peg >= 0:
             points.append(surface_points(env.panel_assets[0], env.panel.pose.sp.to_transformation_matrix()))
         return np.concatenate(points)
