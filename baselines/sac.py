@@ -2,6 +2,12 @@
 
     python baselines/sac.py --env-id SampleCollection-v1 --env-kwargs '{"domain": "mars", "asset_source": "dataset"}'
 
+With ``--demos``, RLPD (Ball et al., 2023, as ManiSkill's ``examples/baselines/rlpd``): SAC on the sparse reward
+with half of every batch drawn from oracle demonstrations and LayerNorm in the critics, e.g.
+
+    python baselines/sac.py --env-id SampleCollection-v1 --env-kwargs '{"domain": "mars", "asset_source": "dataset"}' \
+        --reward-mode sparse --demos demos/SampleCollection-v1/motionplanning/tubes.h5 --critic-layer-norm --gamma 0.9
+
 Envs as in ``ppo.py`` (GPU-batched with CUDA, worker processes on a CPU). Writes ``runs/<name>/curve.csv``,
 ``curve.png`` and ``checkpoint.pt`` (the actor) for ``python -m mani_skill_space.eval --policy checkpoint:PATH``.
 """
@@ -13,7 +19,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import numpy as np
 import torch
@@ -21,7 +27,7 @@ import torch.nn as nn
 import tyro
 from tqdm import tqdm
 
-from mani_skill_space.learning import LearningCurve, SquashedGaussianActor, VectorEnv, mlp, save_checkpoint
+from mani_skill_space.learning import LearningCurve, SquashedGaussianActor, VectorEnv, load_demonstrations, mlp, save_checkpoint, task_of_demonstrations
 
 
 @dataclass
@@ -42,6 +48,18 @@ class Args:
     gamma: float = 0.8
     tau: float = 0.01
     lr: float = 3e-4
+    reward_mode: Literal["normalized_dense", "sparse"] = "normalized_dense"
+    """``sparse``: 1 on the steps the task is solved, else 0 (ManiSkill's sparse reward, what RLPD learns from)."""
+    demos: Optional[Path] = None
+    """RLPD: draw half of every batch from these demonstrations (a ManiSkill trajectory file with state
+    observations, recorded on the same env, kwargs and control mode; its successful episodes), the other half
+    from the agent's own interaction. Their rewards are the file's per-step success, so this needs
+    ``--reward-mode sparse``."""
+    num_demos: Optional[int] = None
+    """Use only the first N successful demonstrations."""
+    critic_layer_norm: bool = False
+    """LayerNorm after each hidden layer of the critics (RLPD's guard against over-estimating the value of the
+    actions that only the demonstrations take)."""
     log_every: int = 1_000
     output_dir: Path = Path("runs")
     name: Optional[str] = None
@@ -50,21 +68,53 @@ class Args:
 
 
 class TwinQ(nn.Module):
-    def __init__(self, state_dim: int, action_dim: int, hidden: int = 256):
+    def __init__(self, state_dim: int, action_dim: int, hidden: int = 256, layer_norm: bool = False):
         super().__init__()
-        self.q1 = mlp([state_dim + action_dim, hidden, hidden, 1])
-        self.q2 = mlp([state_dim + action_dim, hidden, hidden, 1])
+        sizes = [state_dim + action_dim, hidden, hidden, 1]
+        self.q1 = _layer_normed_mlp(sizes) if layer_norm else mlp(sizes)
+        self.q2 = _layer_normed_mlp(sizes) if layer_norm else mlp(sizes)
 
     def forward(self, state, action):
         joint = torch.cat([state, action], dim=-1)
         return self.q1(joint).squeeze(-1), self.q2(joint).squeeze(-1)
 
 
+def _layer_normed_mlp(sizes: list[int]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 2):
+        layers += [nn.Linear(sizes[i], sizes[i + 1]), nn.LayerNorm(sizes[i + 1]), nn.ReLU()]
+    return nn.Sequential(*layers, nn.Linear(sizes[-2], sizes[-1]))
+
+
+def demonstration_transitions(args: Args, env_kwargs: dict, device: torch.device) -> dict[str, torch.Tensor]:
+    """The successful episodes of ``args.demos`` as transitions with the sparse reward (the file's per-step
+    success); the file must have been recorded on the env, kwargs and control mode being trained."""
+    if args.reward_mode != "sparse":
+        raise ValueError(f"--demos needs --reward-mode sparse (the demonstrations record success, not the {args.reward_mode} reward)")
+    episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
+    recorded = task_of_demonstrations(env_info)
+    wanted = (args.env_id, env_kwargs, "state", args.control_mode)
+    if recorded != wanted:
+        raise ValueError(f"{args.demos} holds demonstrations of {recorded} (env id, kwargs, obs mode, control mode), not {wanted}")
+    if any("success" not in e or "terminated" not in e for e in episodes):
+        raise ValueError(f"{args.demos} does not record per-step success and terminated flags")
+    joined = lambda key, part=slice(None): torch.as_tensor(np.concatenate([e[key][part] for e in episodes]), dtype=torch.float32, device=device)  # noqa: E731
+    return dict(
+        state=joined("obs", slice(None, -1)),
+        action=joined("actions"),
+        reward=joined("success"),
+        next_state=joined("obs", slice(1, None)),
+        terminated=joined("terminated"),
+    )
+
+
 def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
     device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
     env_kwargs = json.loads(args.env_kwargs)
-    envs = VectorEnv(args.env_id, args.num_envs, env_kwargs, "state", args.control_mode, device)
+    demos = demonstration_transitions(args, env_kwargs, device) if args.demos is not None else None
+    algorithm = "sac" if demos is None else "rlpd"
+    envs = VectorEnv(args.env_id, args.num_envs, env_kwargs, "state", args.control_mode, device, reward_mode=args.reward_mode)
     run_dir = args.output_dir / (args.name or f"sac-{args.env_id}-{int(time.time())}")
     curve = LearningCurve(run_dir, ["global_step", "minutes", "return", "success_once", "success_at_end", "episodes", "q_loss", "alpha"])
     obs = envs.reset(args.seed)
@@ -72,7 +122,7 @@ def main(args: Args) -> Path:
     state_dim, action_dim = obs["state"].shape[1], space.shape[0]
     model_kwargs = dict(state_dim=state_dim, action_dim=action_dim, action_low=space.low.tolist(), action_high=space.high.tolist())
     actor = SquashedGaussianActor(**model_kwargs).to(device)
-    critic = TwinQ(state_dim, action_dim).to(device)
+    critic = TwinQ(state_dim, action_dim, layer_norm=args.critic_layer_norm).to(device)
     target = copy.deepcopy(critic)
     log_alpha = torch.zeros(1, requires_grad=True, device=device)
     target_entropy = -float(action_dim)
@@ -126,7 +176,8 @@ def main(args: Args) -> Path:
             pending_updates += n * args.updates_per_step
             while pending_updates >= 1:
                 pending_updates -= 1
-                q_loss = update(buffer, filled, args, actor, critic, target, log_alpha, target_entropy, actor_optimiser, critic_optimiser, alpha_optimiser)
+                batch = sample_batch(buffer, filled, demos, args.batch_size)
+                q_loss = update(batch, args, actor, critic, target, log_alpha, target_entropy, actor_optimiser, critic_optimiser, alpha_optimiser)
         minutes = (time.time() - start) / 60
         out_of_time = args.minutes is not None and minutes >= args.minutes
         if global_step % args.log_every < n or out_of_time or global_step >= args.total_timesteps:
@@ -135,21 +186,32 @@ def main(args: Args) -> Path:
                 row.update({"return": np.mean(finished["returns"]), "success_once": np.mean(finished["once"]), "success_at_end": np.mean(finished["end"])})
             curve.log(**row)
             finished = dict(returns=[], once=[], end=[])
-            save_checkpoint(checkpoint, "sac", actor, model_kwargs, args.env_id, env_kwargs, "state", args.control_mode)
+            save_checkpoint(checkpoint, algorithm, actor, model_kwargs, args.env_id, env_kwargs, "state", args.control_mode)
         if out_of_time:
             break
     progress.close()
     envs.close()
-    save_checkpoint(checkpoint, "sac", actor, model_kwargs, args.env_id, env_kwargs, "state", args.control_mode)
-    curve.plot("global_step", ["return", "success_once", "success_at_end"], f"SAC on {args.env_id}")
+    save_checkpoint(checkpoint, algorithm, actor, model_kwargs, args.env_id, env_kwargs, "state", args.control_mode)
+    curve.plot("global_step", ["return", "success_once", "success_at_end"], f"{algorithm.upper()} on {args.env_id}")
     print(f"checkpoint: {checkpoint}")
     return checkpoint
 
 
-def update(buffer, filled, args, actor, critic, target, log_alpha, target_entropy, actor_optimiser, critic_optimiser, alpha_optimiser) -> torch.Tensor:
-    index = torch.randint(0, filled, (args.batch_size,), device=log_alpha.device)
-    state, action, reward = buffer["state"][index], buffer["action"][index], buffer["reward"][index]
-    next_state, terminated = buffer["next_state"][index], buffer["terminated"][index]
+def sample_batch(buffer: dict, filled: int, demos: Optional[dict], batch_size: int) -> dict[str, torch.Tensor]:
+    """``batch_size`` transitions from the first ``filled`` of the replay buffer, or, with demonstrations, half
+    from them and half from the buffer (RLPD's symmetric sampling)."""
+    own = batch_size if demos is None else batch_size - batch_size // 2
+    device = buffer["state"].device
+    index = torch.randint(0, filled, (own,), device=device)
+    batch = {key: values[index] for key, values in buffer.items()}
+    if demos is not None:
+        demo_index = torch.randint(0, len(demos["state"]), (batch_size - own,), device=device)
+        batch = {key: torch.cat([values, demos[key][demo_index]]) for key, values in batch.items()}
+    return batch
+
+
+def update(batch, args, actor, critic, target, log_alpha, target_entropy, actor_optimiser, critic_optimiser, alpha_optimiser) -> torch.Tensor:
+    state, action, reward, next_state, terminated = (batch[key] for key in ("state", "action", "reward", "next_state", "terminated"))
     alpha = log_alpha.exp().detach()
     with torch.no_grad():
         next_action, next_logprob = actor.sample({"state": next_state})

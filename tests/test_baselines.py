@@ -149,6 +149,41 @@ def test_sac(tmp_path):
     _score(checkpoint, tmp_path)
 
 
+def test_rlpd_learns_from_the_sparse_reward_with_half_of_each_batch_from_the_demonstrations(demos, tmp_path):
+    sac = _baseline("sac")
+    args = sac.Args(
+        env_kwargs=json.dumps(ENV_KWARGS), num_envs=2, total_timesteps=320, learning_starts=100, batch_size=64, buffer_size=1000, log_every=100,
+        output_dir=tmp_path, name="rlpd", reward_mode="sparse", demos=demos, critic_layer_norm=True,
+    )  # fmt: skip
+    transitions = sac.demonstration_transitions(args, ENV_KWARGS, torch.device("cpu"))
+    episodes, _ = load_demonstrations(demos)
+    assert len(transitions["state"]) == sum(len(e["actions"]) for e in episodes)
+    assert transitions["reward"].sum().item() == sum(e["success"].sum() for e in episodes) > 0  # the sparse reward: 1 where solved
+    checkpoint = sac.main(args)
+    assert torch.load(checkpoint, weights_only=True)["algorithm"] == "rlpd"
+    assert any(r["episodes"] not in ("", "0") for r in _curve(tmp_path / "rlpd"))
+    _score(checkpoint, tmp_path)
+
+
+def test_rlpd_refuses_a_dense_reward_and_demonstrations_of_another_task(demos):
+    sac = _baseline("sac")
+    with pytest.raises(ValueError, match="needs --reward-mode sparse"):
+        sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=demos), ENV_KWARGS, torch.device("cpu"))
+    moon = dict(ENV_KWARGS, domain="moon")
+    with pytest.raises(ValueError, match="holds demonstrations of"):
+        sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(moon), demos=demos, reward_mode="sparse"), moon, torch.device("cpu"))
+
+
+def test_rlpd_batches_are_half_demonstrations():
+    sac = _baseline("sac")
+    own = {key: torch.zeros(100, 3) for key in ("state", "action", "reward", "next_state", "terminated")}
+    demos = {key: torch.ones(10, 3) for key in own}
+    batch = sac.sample_batch(own, 50, demos, 64)
+    assert all(len(values) == 64 for values in batch.values())
+    assert batch["state"][:, 0].sum().item() == 32
+    assert sac.sample_batch(own, 50, None, 64)["state"].sum().item() == 0
+
+
 def test_checkpoint_of_another_task_is_refused(tmp_path, demos):
     bc = _baseline("bc")
     checkpoint = bc.main(bc.Args(demos=demos, max_iterations=10, eval_every=10, eval_episodes=0, output_dir=tmp_path, name="bc"))

@@ -10,7 +10,8 @@ import numpy as np
 
 def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[int] = None) -> tuple[list[dict[str, np.ndarray]], dict]:
     """Episodes of a ManiSkill trajectory file (``.h5`` + ``.json``, state observations): a list of
-    ``{"obs": (T + 1, d), "actions": (T, a)}`` and the file's env info (env id, env kwargs)."""
+    ``{"obs": (T + 1, d), "actions": (T, a)}`` (with ``"success"`` and ``"terminated"``, (T,) booleans, where the
+    file records them, as ManiSkill's ``RecordEpisode`` does) and the file's env info (env id, env kwargs)."""
     import json
 
     import h5py
@@ -26,7 +27,9 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
             obs = trajectory["obs"]
             if not isinstance(obs, h5py.Dataset):
                 raise ValueError(f"{path} has {sorted(obs.keys())} observations; convert it with obs mode 'state' (-o state)")
-            episodes.append({"obs": np.asarray(obs, dtype=np.float32), "actions": np.asarray(trajectory["actions"], dtype=np.float32)})
+            episode_data = {"obs": np.asarray(obs, dtype=np.float32), "actions": np.asarray(trajectory["actions"], dtype=np.float32)}
+            episode_data.update({flag: np.asarray(trajectory[flag], dtype=bool) for flag in ("success", "terminated") if flag in trajectory})
+            episodes.append(episode_data)
             if limit is not None and len(episodes) >= limit:
                 break
     if not episodes:
@@ -34,8 +37,9 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
     return episodes, meta["env_info"]
 
 
-RECORDING_KWARGS = ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs")
-"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task."""
+RECORDING_KWARGS = ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs", "sensor_configs", "human_render_camera_configs", "viewer_camera_configs")
+"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task (ManiSkill's replay
+tool adds the camera configs it rendered with)."""
 
 
 def task_of_demonstrations(env_info: dict) -> tuple[str, dict, str, str]:

@@ -15,11 +15,13 @@ class VectorEnv:
     finished episode is kept for bootstrapping). On CUDA: one GPU-batched ManiSkill env; on the CPU:
     ``gymnasium.vector.AsyncVectorEnv`` of single envs in worker processes, as ManiSkill runs CPU envs."""
 
-    def __init__(self, env_id: str, num_envs: int, env_kwargs: dict, obs_mode: str, control_mode: str, device: torch.device, gpu: Optional[bool] = None):
+    def __init__(
+        self, env_id: str, num_envs: int, env_kwargs: dict, obs_mode: str, control_mode: str, device: torch.device, gpu: Optional[bool] = None, reward_mode: str = "normalized_dense"
+    ):
         import gymnasium as gym
 
         self.obs_mode, self.device, self.num_envs = obs_mode, device, num_envs
-        kwargs = dict(env_kwargs, obs_mode=obs_mode, control_mode=control_mode, reward_mode="normalized_dense")
+        kwargs = dict(env_kwargs, obs_mode=obs_mode, control_mode=control_mode, reward_mode=reward_mode)
         if obs_mode in STATE_OBS_MODES:
             kwargs.setdefault("render_backend", "none")
         self.gpu = torch.cuda.is_available() if gpu is None else gpu
