@@ -83,8 +83,13 @@ class Report:
     assets_ms: dict[str, float] = field(default_factory=dict)
 
 
+SENSOR_SIZE = 64
+
+
 def env_kwargs(obs_mode: str) -> dict:
-    kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sensor_configs=dict(width=64, height=64))
+    """What the bench makes every env with (ours and ManiSkill's alike): random ``pd_ee_delta_pose`` actions,
+    64x64 cameras, no renderer in state mode."""
+    kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sensor_configs=dict(width=SENSOR_SIZE, height=SENSOR_SIZE))
     if obs_mode == "state":
         kwargs["render_backend"] = "none"
     return kwargs
@@ -213,14 +218,19 @@ def format_report(report: Report) -> str:
     return "\n".join(lines)
 
 
+def check_env_ids_and_obs_modes(env_ids: Sequence[str], obs_modes: Sequence[str]) -> None:
+    """A ``ValueError`` for an env id without a ManiSkill reference or an observation mode the envs reject."""
+    for env_id in env_ids:
+        if env_id not in REFERENCES:
+            raise ValueError(f"no ManiSkill reference for env id {env_id!r}; valid choices: {', '.join(REFERENCES)}")
+        for obs_mode in obs_modes:
+            task_class(env_id).check_task_kwargs(obs_mode=obs_mode)
+
+
 def check_args(args: Args) -> None:
     """A ``ValueError`` naming the first bad input: an env id without a ManiSkill reference, an observation mode
     the envs reject, a count below 1."""
-    for env_id in args.env_ids:
-        if env_id not in REFERENCES:
-            raise ValueError(f"no ManiSkill reference for env id {env_id!r}; valid choices: {', '.join(REFERENCES)}")
-        for obs_mode in args.obs_modes:
-            task_class(env_id).check_task_kwargs(obs_mode=obs_mode)
+    check_env_ids_and_obs_modes(args.env_ids, args.obs_modes)
     for name, value in (("--steps", args.steps), ("--rounds", args.rounds), ("--reconfigures", args.reconfigures), ("--asset-repeats", args.asset_repeats)):
         check_at_least(name, value, 1)
     check_at_least("--vector-workers", args.vector_workers, 0)

@@ -66,13 +66,13 @@ def run_cli(tool: str, parse: Callable[[list[str]], Args], main: Callable[[Args]
         raise SystemExit(USER_ERROR_EXIT_STATUS) from None
 
 
-def tyro_parser(args_type: type[Args], tool: str, description: Optional[str]) -> Callable[[list[str]], Args]:
+def tyro_parser(args_type: type[Args], tool: str, description: Optional[str], prog: Optional[str] = None) -> Callable[[list[str]], Args]:
     """A ``parse`` for ``run_cli``: tyro on ``args_type``, its help headed by ``description`` (the tool's module
-    docstring) and the ``--debug`` flag."""
+    docstring) and the ``--debug`` flag; ``prog`` (``mani-skill-space TOOL`` by default) is how its usage names it."""
     import tyro
 
     text = f"{(description or '').strip()}\n\n{DEBUG_HELP}"
-    return lambda arguments: tyro.cli(args_type, args=arguments, prog=f"{PROG} {tool}", description=text)
+    return lambda arguments: tyro.cli(args_type, args=arguments, prog=prog or f"{PROG} {tool}", description=text)
 
 
 def parse_json_object(text: str, option: str) -> dict[str, Any]:

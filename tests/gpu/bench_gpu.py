@@ -29,12 +29,10 @@ import gymnasium as gym
 import torch
 
 import mani_skill_space
-from mani_skill_space.bench import REFERENCES, interleaved_medians
-from mani_skill_space.cli_support import DEBUG_HELP, UserError, check_at_least, checking_inputs, run_cli
-from mani_skill_space.envs import task_class
+from mani_skill_space.bench import REFERENCES, check_env_ids_and_obs_modes, env_kwargs, interleaved_medians
+from mani_skill_space.cli_support import UserError, check_at_least, checking_inputs, run_cli, tyro_parser
 
 TOOL = "bench-gpu"
-SENSOR_SIZE = 64
 
 
 @dataclass
@@ -74,16 +72,7 @@ class Report:
 
 
 def make_env(env_id: str, obs_mode: str, num_envs: int) -> gym.Env:
-    kwargs = dict(
-        num_envs=num_envs,
-        sim_backend="physx_cuda",
-        obs_mode=obs_mode,
-        control_mode="pd_ee_delta_pose",
-        sensor_configs=dict(width=SENSOR_SIZE, height=SENSOR_SIZE),
-    )
-    if obs_mode == "state":
-        kwargs["render_backend"] = "none"
-    return gym.make(env_id, **kwargs)
+    return gym.make(env_id, num_envs=num_envs, sim_backend="physx_cuda", **env_kwargs(obs_mode))
 
 
 def built_env(env_id: str, obs_mode: str, num_envs: int) -> tuple[gym.Env, float]:
@@ -159,11 +148,7 @@ def format_report(report: Report) -> str:
 def check_args(args: Args) -> None:
     """A ``ValueError`` naming the first bad input: an env id without a ManiSkill peer, an observation mode the envs
     reject, a count below 1."""
-    for env_id in args.env_ids:
-        if env_id not in REFERENCES:
-            raise ValueError(f"no ManiSkill reference for env id {env_id!r}; valid choices: {', '.join(REFERENCES)}")
-        for obs_mode in args.obs_modes:
-            task_class(env_id).check_task_kwargs(obs_mode=obs_mode)
+    check_env_ids_and_obs_modes(args.env_ids, args.obs_modes)
     for num_envs in args.num_envs:
         check_at_least("--num-envs", num_envs, 1)
     for name, value in (("--steps", args.steps), ("--rounds", args.rounds)):
@@ -192,16 +177,9 @@ def main(args: Args) -> Report:
     return report
 
 
-def parse(arguments: list[str]) -> Args:
-    import tyro
-
-    description = f"{(__doc__ or '').strip()}\n\n{DEBUG_HELP}"
-    return tyro.cli(Args, args=arguments, prog="python tests/gpu/bench_gpu.py", description=description)
-
-
 def cli(argv: Optional[Sequence[str]] = None) -> None:
     """``python tests/gpu/bench_gpu.py ARGS``."""
-    run_cli(TOOL, parse, main, argv)
+    run_cli(TOOL, tyro_parser(Args, TOOL, __doc__, prog="python tests/gpu/bench_gpu.py"), main, argv)
 
 
 if __name__ == "__main__":
