@@ -11,6 +11,10 @@ import math
 import numbers
 from typing import Any, Optional, Sequence
 
+RUN_KWARGS = ("render_mode", "render_backend", "sim_backend", "reward_mode", "num_envs", "sensor_configs", "human_render_camera_configs", "viewer_camera_configs")
+"""ManiSkill env kwargs that say how an env was run, not which task it was: what a trajectory file or a checkpoint
+records beside the task's kwargs (ManiSkill's replay tool adds the camera configs it rendered with)."""
+
 
 class KwargError(ValueError):
     """A bad env kwarg. ``kwarg`` names it, so that a suite can point at the line of that key."""

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from mani_skill_space.envs import TASKS
-from mani_skill_space.kwarg_checks import KwargError
+from mani_skill_space.kwarg_checks import RUN_KWARGS, KwargError
 from mani_skill_space.metrics import format_rate, wilson_interval
 from mani_skill_space.suites import SHIPPED_SUITES_PACKAGE, Configuration, Suite, SuiteError, check_env_kwargs, reject_unknown_keys
 
@@ -41,7 +41,7 @@ TEST_KEYS = {"name", "kwargs", "episodes"}
 IN_DISTRIBUTION = "train"
 """Name of the in-distribution column (the training condition on fresh episode seeds)."""
 PROTOCOLS_FOLDER = "generalisation"
-MANISKILL_CONFIG_KWARGS = ("sensor_configs", "human_render_camera_configs", "viewer_camera_configs", "render_mode", "render_backend", "sim_backend", "obs_mode", "control_mode", "reward_mode")
+MANISKILL_CONFIG_KWARGS = RUN_KWARGS + ("obs_mode", "control_mode")
 """Env kwargs a recorded training condition may carry that say how the env was run, not which task it was."""
 
 

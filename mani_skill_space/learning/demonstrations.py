@@ -7,6 +7,8 @@ from typing import Optional
 
 import numpy as np
 
+from mani_skill_space.kwarg_checks import RUN_KWARGS
+
 
 def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[int] = None) -> tuple[list[dict[str, np.ndarray]], dict]:
     """Episodes of a ManiSkill trajectory file (``.h5`` + ``.json``, state observations): a list of
@@ -37,9 +39,8 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
     return episodes, meta["env_info"]
 
 
-RECORDING_KWARGS = ("render_mode", "sim_backend", "reward_mode", "render_backend", "num_envs", "sensor_configs", "human_render_camera_configs", "viewer_camera_configs")
-"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task (ManiSkill's replay
-tool adds the camera configs it rendered with)."""
+RECORDING_KWARGS = RUN_KWARGS
+"""Env kwargs a trajectory file records that belong to how it was recorded, not to the task."""
 
 
 def task_of_demonstrations(env_info: dict) -> tuple[str, dict, str, str]:
