@@ -196,18 +196,24 @@ def _report(suite: Suite, policies: tuple[str, ...], results: dict) -> dict:
 
 
 def markdown_table(report: dict) -> str:
+    """The report as a table; staged tasks (rows with a ``stage_mean``) add a column with the mean highest stage."""
+    staged = any(row["summary"].get("stage_mean") is not None for row in report["rows"])
+    stage_header = (" stage |", "---|") if staged else ("", "")
     lines = [
         f"Suite `{report['suite']}`: success rates with 95% Wilson intervals.",
         "",
-        "| configuration | policy | episodes | success_once | success_at_end | return | episode_len |",
-        "|---|---|---|---|---|---|---|",
+        "| configuration | policy | episodes | success_once | success_at_end | return | episode_len |" + stage_header[0],
+        "|---|---|---|---|---|---|---|" + stage_header[1],
     ]
     for row in report["rows"]:
         s = row["summary"]
-        lines.append(
+        line = (
             f"| {row['configuration']} | {row['policy']} | {s['episodes']} | {format_rate(s['success_once'], s['success_once_ci95'])} "
             f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {s['episode_len_mean']:.1f} |"
         )
+        if staged:
+            line += " - |" if s.get("stage_mean") is None else f" {s['stage_mean']:.2f} |"
+        lines.append(line)
     return "\n".join(lines)
 
 

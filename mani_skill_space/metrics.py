@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Optional
 
 
 @dataclass(frozen=True)
@@ -16,6 +17,9 @@ class EpisodeResult:
     """Steps until the first success, or all the steps the episode ran when it never succeeded."""
     failure: str = ""
     """Why a scripted policy gave up (e.g. a planning failure); empty otherwise."""
+    stage: Optional[int] = None
+    """The highest ``info["stage"]`` the episode reached (staged tasks: the sockets filled in Solar Panel Assembly,
+    the samples or pegs placed in the multi-object tasks); None where the env reports no stage."""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -51,4 +55,12 @@ def summarize(results: list[EpisodeResult]) -> dict:
         "success_at_end_ci95": wilson_interval(at_end, n),
         "return_mean": sum(r.episode_return for r in results) / n,
         "episode_len_mean": sum(r.episode_len for r in results) / n,
+        "stage_mean": mean_stage(results),
     }
+
+
+def mean_stage(results: list[EpisodeResult]) -> Optional[float]:
+    """The mean of the highest stage each episode reached; None unless every episode reports a stage."""
+    if not results or any(r.stage is None for r in results):
+        return None
+    return sum(r.stage for r in results) / len(results)

@@ -48,11 +48,14 @@ def run_episode(
         policy.reset(env, seed)
     if on_step is not None:
         on_step()
-    total, first_success, steps, success = 0.0, None, 0, False
+    total, first_success, steps, success, stage = 0.0, None, 0, False, None
     for steps in range(1, episode_steps(env) + 1):
         obs, reward, _, truncated, info = env.step(policy.act(obs))
         total += float(reward)
         success = bool(info["success"])
+        if "stage" in info:
+            reached = int(info["stage"])
+            stage = reached if stage is None else max(stage, reached)
         if success and first_success is None:
             first_success = steps
         if on_step is not None:
@@ -66,6 +69,7 @@ def run_episode(
         episode_return=total,
         episode_len=first_success or steps,
         failure=getattr(policy, "failure", None) or "",
+        stage=stage,
     )
 
 

@@ -2,10 +2,15 @@ import json
 import textwrap
 from pathlib import Path
 
+import gymnasium as gym
+import numpy as np
 import pytest
+import torch
 
 from mani_skill_space import eval as evaluation
+from mani_skill_space.metrics import EpisodeResult, summarize
 from mani_skill_space.policies import load_policy
+from mani_skill_space.rollout import run_episode
 
 SUITE = """
 name = "tiny"
@@ -70,3 +75,39 @@ def test_bad_policy_specs_are_rejected():
         load_policy("dreamer")
     with pytest.raises(ModuleNotFoundError):
         load_policy("no_such_module:make")
+
+
+class _StagedEnv(gym.Env):
+    """Four steps whose info reports stages 1, 2, 1, 1: the episode's highest stage is 2."""
+
+    observation_space = gym.spaces.Box(-1, 1, (1,))
+    action_space = gym.spaces.Box(-1, 1, (1,))
+    max_episode_steps = 4
+    stages = (1, 2, 1, 1)
+
+    def reset(self, seed=None, options=None):
+        self.t = 0
+        return np.zeros(1, np.float32), {}
+
+    def step(self, action):
+        stage = self.stages[self.t]
+        self.t += 1
+        info = {"success": torch.tensor([False]), "stage": torch.tensor([stage])}
+        return np.zeros(1, np.float32), 0.0, False, self.t == self.max_episode_steps, info
+
+
+def test_episodes_record_the_highest_stage_reached():
+    result = run_episode(_StagedEnv(), load_policy("zero"), seed=0)
+    assert result.stage == 2
+
+
+def test_table_has_a_stage_column_only_for_staged_tasks():
+    def row(stage_mean):
+        summary = summarize([EpisodeResult(0, True, True, 1.0, 10, stage=stage_mean)])
+        return {"configuration": "c", "policy": "p", "summary": summary}
+
+    plain = evaluation.markdown_table({"suite": "s", "rows": [row(None)]})
+    assert "stage" not in plain
+    staged = evaluation.markdown_table({"suite": "s", "rows": [row(None), row(3)]}).splitlines()
+    assert staged[2].endswith("| stage |")
+    assert staged[-2].endswith("| - |") and staged[-1].endswith("| 3.00 |")

@@ -34,3 +34,10 @@ def test_summary_rates_means_and_intervals():
     assert summary["success_once"] == 0.5 and summary["success_at_end"] == 0.25
     assert summary["success_once_ci95"] == wilson_interval(4, 8)
     assert summary["return_mean"] == 3.5 and summary["episode_len_mean"] == 103.5
+
+
+def test_mean_stage_needs_every_episode_staged():
+    staged = [EpisodeResult(s, False, False, 0.0, 100, stage=s % 3) for s in range(6)]
+    assert summarize(staged)["stage_mean"] == 1.0
+    assert summarize(staged[:2] + [EpisodeResult(9, True, True, 1.0, 50)])["stage_mean"] is None
+    assert summarize([EpisodeResult(0, True, True, 1.0, 50)])["stage_mean"] is None
