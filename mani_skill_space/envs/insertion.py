@@ -52,6 +52,12 @@ HAND_OUTWARD_MIN = -0.3
 horizontal direction from the arm's base to the hole must be at least this. Measured with the oracle on
 procedural pairs (seeds 50000-50099, Earth): of the placements below it, 1 in 19 was inserted; of those above,
 3 in 4."""
+MIN_GRIP_HEIGHT = 0.010
+"""m: ``grippable_faces``: a peg lies only on a side from which it rises at least this high. The Panda's finger pads
+are 18.5 mm tall and its fingertips must stay above the ground, so a flatter peg is held by its thin edge over
+less than half of the pads, and turns or slips out of the grip as the arm swings it (measured with the oracle on
+procedural pairs, seeds 60000-60059 in every domain: pegs lying under 10 mm tall were inserted in 3 of 16
+episodes, the others in 88%). A squashed peg that can stand on its narrow side lies that way instead."""
 LYING_AXIS = np.array([0.0, 0.0, 1.0])
 """A peg lies on a side, never on an end: its axis (z) is never the resting direction."""
 
@@ -235,12 +241,44 @@ def reachable_faces(placement: RestingPlacement, tip_frames: torch.Tensor, hole_
     return usable.any(dim=-1) & real_face
 
 
-def reachable_faces_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray) -> torch.Tensor:
-    """``reachable_faces`` (faces,) of one peg asset for its hole's ``hole_bottom`` (world, 4 x 4), on the CPU."""
+def grippable_faces(placement: RestingPlacement) -> torch.Tensor:
+    """(n, faces) which of each env's resting faces (``placement``) leave its peg at least ``MIN_GRIP_HEIGHT`` tall as
+    it lies, so that the fingers can take it firmly. Padded faces are False."""
+    rest = quaternion_to_matrix(placement.quaternions)  # (n, F, 3, 3)
+    heights = torch.einsum("nfj,npj->nfp", rest[..., 2, :], placement.points)  # every vertex's height, lying on each face
+    tall_enough = heights.amax(dim=-1) - heights.amin(dim=-1) >= MIN_GRIP_HEIGHT
+    real_face = torch.arange(rest.shape[1], device=placement.counts.device)[None, :] < placement.counts[:, None]
+    return tall_enough & real_face
+
+
+def insertable_faces(placement: RestingPlacement, tip_frames: torch.Tensor, hole_bottoms: torch.Tensor, symmetry_orders: torch.Tensor, arm_base: torch.Tensor) -> torch.Tensor:
+    """(n, faces): the resting faces that pass every solvability check, ``reachable_faces`` (same arguments) and
+    ``grippable_faces``: the faces an episode's peg may lie on."""
+    return reachable_faces(placement, tip_frames, hole_bottoms, symmetry_orders, arm_base) & grippable_faces(placement)
+
+
+def face_checks_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray) -> dict[str, torch.Tensor]:
+    """Each solvability check's verdict (faces,) on every resting face of one peg asset, for its hole's
+    ``hole_bottom`` (world, 4 x 4) and an arm at ``arm_base``, on the CPU: ``reachable`` (``reachable_faces``),
+    ``grippable`` (``grippable_faces``) and ``insertable`` (both)."""
     as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)  # noqa: E731
-    return reachable_faces(
-        peg_placement([peg], "cpu"), as_tensor(peg.frames["end_0"])[None], as_tensor(hole_bottom)[None], torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)
+    placement = peg_placement([peg], "cpu")
+    reachable = reachable_faces(
+        placement, as_tensor(peg.frames["end_0"])[None], as_tensor(hole_bottom)[None], torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)
     )[0]
+    grippable = grippable_faces(placement)[0]
+    return dict(reachable=reachable, grippable=grippable, insertable=reachable & grippable)
+
+
+def feasibility_record(draws: int, checks: Sequence[dict[str, torch.Tensor]]) -> dict:
+    """What a procedural instance records of its solvability checks (its asset's ``info["feasibility"]``): the draws
+    it took, and for each peg its resting faces and how many pass each check (``face_checks_of``)."""
+    return {
+        "draws": draws,
+        "checks": sorted(checks[0]),
+        "resting_faces": [len(c["insertable"]) for c in checks],
+        **{f"{name}_resting_faces": [int(c[name].sum()) for c in checks] for name in sorted(checks[0])},
+    }
 
 
 def redrawn_seed(seed: int, draw: int) -> int:

@@ -17,10 +17,10 @@ from mani_skill_space.envs.insertion import (
     lying_peg_orientation,
     peg_placement,
     pegs_latched_in_holes,
-    reachable_faces,
+    insertable_faces,
     seated_pairs,
 )
-from mani_skill_space.envs.peg_in_hole_assembly import MODULE_POSITION, PEG_DISTANCE, reachable_peg_hole_pair
+from mani_skill_space.envs.peg_in_hole_assembly import PEG_DISTANCE, module_position, reachable_peg_hole_pair
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import make_rover, make_station
 from mani_skill_space.rewards import RewardTable, RewardTerm
@@ -28,8 +28,9 @@ from mani_skill_space.rewards import RewardTable, RewardTerm
 PAIR_COUNT = 4
 MODULE_YS = (0.255, 0.085, -0.085, -0.255)
 """The four hole modules (0.15 m blocks, 2 cm apart) stand in a row across the arm's front at Peg-in-Hole's
-distance (x = 0.7 m): the grid is one row, so that every module is as far from the arm as Peg-in-Hole's and
-each peg lies in front of its own module, as in Peg-in-Hole."""
+distance (``peg_in_hole_assembly.module_position``: 0.6 m for procedural modules, 0.7 m for the dataset posts): the
+grid is one row, so that every module is as far from the arm as Peg-in-Hole's and each peg lies in front of its
+own module, as in Peg-in-Hole."""
 PEG_LANE_YS = (0.18, 0.06, -0.06, -0.18)
 """Each peg lies in its own lane in front of the modules, in the modules' order but closer together (0.12 m apart)
 than the modules, within Peg-in-Hole's lateral range and a little beyond: at the outer modules' 0.255 m the arm
@@ -42,9 +43,10 @@ PEG_TERMS = insertion_terms(prefix="peg_")
 REWARD_TABLE = RewardTable((RewardTerm("pegs_inserted", PAIR_COUNT * INSERTION_VALUE), *PEG_TERMS, *PENALTY_TERMS))
 
 
-def module_positions() -> np.ndarray:
-    """(4, 3) world positions of the hole modules' base centres."""
-    return np.array([[MODULE_POSITION[0], y, MODULE_POSITION[2]] for y in MODULE_YS])
+def module_positions(asset_source: str) -> np.ndarray:
+    """(4, 3) world positions of the hole modules' base centres for ``asset_source``."""
+    x, _, z = module_position(asset_source)
+    return np.array([[x, y, z] for y in MODULE_YS])
 
 
 @register_env("MultiPegInHoleAssembly-v1", max_episode_steps=800)
@@ -62,9 +64,10 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       and the 22 x 22 mm socket on a 50 x 50 mm post; `asset_source="procedural"` gives Peg-in-Hole's procedural
       pairs (random profile, size, taper; hole at a random offset, tilt up to 20 deg and depth, `clearance`
       default 1 mm), each drawn again until the arm can insert it at its module (`reachable_peg_hole_pair`)
-    - the modules stand at x = 0.7 m, y = +-0.085 and +-0.255 m; each peg lies on a random stable side 0.24-0.28 m
-      in front of its module, within +-2 cm of its centre line, its tip toward the arm within +-11 deg (for
-      procedural pairs, only on a side from which the arm can take it and hold it over its hole)
+    - the modules stand at x = 0.6 m (procedural; the dataset posts at 0.7 m, as in Peg-in-Hole), y = +-0.085 and
+      +-0.255 m; each peg lies on a random stable side 0.24-0.28 m in front of its module, within +-2 cm of its
+      centre line, its tip toward the arm within +-11 deg (for procedural pairs, only on a side from which the arm
+      can take it and hold it over its hole, and that leaves it at least 1 cm tall for the fingers)
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
     **Success Conditions:**
@@ -93,7 +96,7 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     def _load_scene(self, options: dict):
         self._load_domain_scene()
         arm_base = self.mount.frames["arm_mount"][:3, 3]
-        positions = module_positions()
+        positions = module_positions(self.asset_source)
         pegs, holes = [], []  # [pair][env]
         for position in positions:
             seeds = self._asset_seeds()
@@ -136,7 +139,7 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=device)
             insertion = self.insertion
             for i, placement in enumerate(self._peg_placements):
-                placement.allow_only(reachable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
+                placement.allow_only(insertable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
         # (peg, hole) pairs that fit: every socket takes every dataset peg; a procedural peg only its own hole
         same_shapes = self.asset_source == "dataset"
         self._fits = torch.ones((PAIR_COUNT, PAIR_COUNT), dtype=torch.bool, device=device) if same_shapes else torch.eye(PAIR_COUNT, dtype=torch.bool, device=device)

@@ -15,11 +15,12 @@ from mani_skill_space.envs.insertion import (
     insertion_terms,
     is_aligned,
     is_inserted,
+    face_checks_of,
+    feasibility_record,
+    insertable_faces,
     latch_force,
     lying_peg_orientation,
     peg_placement,
-    reachable_faces,
-    reachable_faces_of,
     redrawn_seed,
 )
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
@@ -29,8 +30,20 @@ from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 from mani_skill_space.rewards import RewardTable
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
-"""The hole module (or the socket's post) stands here, on the ground or the station's platform: far enough
-from the rover that even the 200 mm peg, lying in front of the module, clears the rover's front."""
+"""The dataset socket's post stands here, on the ground or the station's platform: far enough from the rover that
+even the 200 mm peg, lying in front of the module, clears the rover's front."""
+PROCEDURAL_MODULE_POSITION = (0.6, 0.0, 0.0)
+"""The procedural hole module stands 10 cm nearer the arm: its hole may be tilted up to 28 degrees in any direction
+(up to 20 about each level axis, as in the reference), and over a hole at 0.7 m tilted away from the arm the hand
+holding a peg on the hole's axis is at the edge of the Panda's reach, where a few millimetres of slip in the grasp
+leave no arm configuration (measured with the oracle on procedural pairs, seeds 60000-60059 in every domain: 69%
+inserted at 0.7 m, 83% at 0.6 m, 68% at 0.55 m, where the arm reaches for pegs close under it). The 200 mm dataset
+peg needs the dataset post's 0.7 m (at 0.6 m the oracle inserted 25 of 37)."""
+
+
+def module_position(asset_source: str) -> tuple[float, float, float]:
+    """Where the hole module (or the dataset socket's post) stands for ``asset_source``."""
+    return PROCEDURAL_MODULE_POSITION if asset_source == "procedural" else MODULE_POSITION
 PEG_DISTANCE = (0.24, 0.28)
 """The peg lies this far in front of the module (toward the arm), as in the reference."""
 PEG_LATERAL = 0.05
@@ -42,18 +55,19 @@ six draws is rejected: see ``reachable_peg_hole_pair``)."""
 REWARD_TABLE = RewardTable((*insertion_terms(), *PENALTY_TERMS))
 
 
-def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray, module_position=MODULE_POSITION) -> tuple[Asset, Asset]:
+def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray, module_position=PROCEDURAL_MODULE_POSITION) -> tuple[Asset, Asset]:
     """The procedural pair of ``seed``, drawn again (from seeds derived from it, deterministically) while no
-    resting face of its peg leaves it reachable for insertion (``envs.insertion.reachable_faces``) by an arm at
-    ``arm_base`` with the module at ``module_position``. The hole's ``info["feasibility"]`` records the check: how
-    many draws it took and how many faces pass (the episode's peg lies on one of those)."""
+    resting face of its peg passes the solvability checks (``envs.insertion.face_checks_of``: reachable for
+    insertion by an arm at ``arm_base`` with the module at ``module_position``, and tall enough to grip). The hole's
+    ``info["feasibility"]`` records the checks (``feasibility_record``): how many draws it took and how many faces
+    pass each (the episode's peg lies on one that passes all)."""
     module = np.eye(4)
     module[:3, 3] = module_position
     for draw in range(MAX_PAIR_DRAWS):
         peg, hole = make_peg_hole_pair(redrawn_seed(seed, draw), clearance)
-        faces = reachable_faces_of(peg, module @ hole.frames["bottom"], arm_base)
-        if bool(faces.any()):
-            hole.info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": int(faces.sum()), "resting_faces": len(faces)}
+        checks = face_checks_of(peg, module @ hole.frames["bottom"], arm_base)
+        if bool(checks["insertable"].any()):
+            hole.info["feasibility"] = feasibility_record(draw + 1, [checks])
             return peg, hole
     raise RuntimeError(f"no procedural peg/hole pair the arm can insert in {MAX_PAIR_DRAWS} draws from seed {seed}")
 
@@ -72,11 +86,13 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       20 x 20 mm square profile peg, 100 or 200 mm long (drawn per env), and its 22 x 22 mm, 20 mm deep socket
       on a 50 x 50 mm post; `asset_source="procedural"` gives a peg with a random profile (circle or 3-12 sided
       polygon, squashed), size and taper, and a module with the matching hole cut at a random offset, tilt
-      (up to 20 deg) and depth, `clearance` (default 1 mm, at most 7 mm) wider than the peg
-    - the peg lies on a random stable side 0.24-0.28 m in front of the module, y within +-5 cm, its tip
-      toward the arm within +-11 deg; for procedural pairs, only on a side from which the arm can take it and
-      hold it over the hole (`envs.insertion.reachable_faces`; a pair with no such side is drawn again, and
-      the module asset's `info["feasibility"]` records the check)
+      (up to 20 deg about each level axis) and depth, `clearance` (default 1 mm, at most 7 mm) wider than the peg
+    - the module stands 0.7 m in front of the arm (the dataset post) or 0.6 m (the procedural block, whose tilted
+      holes need the reach); the peg lies on a random stable side 0.24-0.28 m in front of the module, y within
+      +-5 cm, its tip toward the arm within +-11 deg; for procedural pairs, only on a side that passes the
+      solvability checks (`envs.insertion.face_checks_of`): the arm can take it there and hold it over the hole,
+      and it lies at least 1 cm tall, so the fingers can hold it; a pair with no such side is drawn again, and
+      the module asset's `info["feasibility"]` records the checks
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
     **Success Conditions:**
@@ -107,6 +123,7 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
 
     def _load_scene(self, options: dict):
         self._load_domain_scene()
+        self.module_position = module_position(self.asset_source)
         seeds = self._asset_seeds()
         if self.asset_source == "procedural":
             arm_base = self.mount.frames["arm_mount"][:3, 3]
@@ -116,13 +133,13 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             lengths = np.where(np.asarray(seeds) % 2 == 0, "short", "long")
             pegs = [load_dataset_object(f"profile_peg_{length}") for length in lengths]
             holes = [load_dataset_object("profile_socket")] * self.num_envs
-        self.hole_module = build_actor_per_env(self.scene, holes, "hole_module", body_type="static", initial_pose=sapien.Pose(p=MODULE_POSITION))
+        self.hole_module = build_actor_per_env(self.scene, holes, "hole_module", body_type="static", initial_pose=sapien.Pose(p=self.module_position))
         self.hole_assets = holes
         # awake however slowly it drifts: a peg let go in orbit must drift out unless the socket's latch holds it
         self.peg = self.build_graspable(pegs, "peg", never_sleep=True)
         self.peg_assets = pegs
         module = np.eye(4)
-        module[:3, 3] = MODULE_POSITION
+        module[:3, 3] = self.module_position
         self.insertion = PegInsertion.from_assets(
             pegs=[[p] for p in pegs],
             hole_entrances=[[module @ h.frames["entrance"]] for h in holes],
@@ -135,7 +152,7 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         if self.asset_source == "procedural":
             arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=self.device)
             tips = self.insertion.peg_ends[:, 0, 0]
-            self._placement.allow_only(reachable_faces(self._placement, tips, self.insertion.hole_bottom[:, 0], self.insertion.symmetry_order[:, 0], arm_base))
+            self._placement.allow_only(insertable_faces(self._placement, tips, self.insertion.hole_bottom[:, 0], self.insertion.symmetry_order[:, 0], arm_base))
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
@@ -144,7 +161,7 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             self._initialize_agent(env_idx)
             quat = lying_peg_orientation(self._placement, env_idx, rng)
             position = torch.zeros((b, 3))
-            position[:, 0] = MODULE_POSITION[0] - torch.as_tensor(rng.uniform(*PEG_DISTANCE), dtype=torch.float32)
+            position[:, 0] = self.module_position[0] - torch.as_tensor(rng.uniform(*PEG_DISTANCE), dtype=torch.float32)
             position[:, 1] = torch.as_tensor(rng.uniform(-PEG_LATERAL, PEG_LATERAL), dtype=torch.float32)
             position[:, 2] = self._placement.height_on_ground(env_idx, quat, PEG_DROP_CLEARANCE)
             self.peg.set_pose(Pose.create_from_pq(position, quat))

@@ -19,8 +19,9 @@ from mani_skill_space.envs.insertion import (
     lying_peg_orientation,
     peg_placement,
     pegs_latched_in_holes,
-    reachable_faces,
-    reachable_faces_of,
+    face_checks_of,
+    feasibility_record,
+    insertable_faces,
     redrawn_seed,
     seated_pairs,
 )
@@ -78,9 +79,9 @@ MAX_SET_DRAWS = 50
 
 def reachable_solar_set(seed: int, clearance: float, arm_base: np.ndarray) -> tuple:
     """The procedural layout and pegs of ``seed``, drawn again (deterministically) while some peg has no resting
-    face from which the arm can hold it over its socket (``envs.insertion.reachable_faces``). The layout's
-    ``feasibility`` dict (on the first peg's ``info``) records how many draws it took and each socket's count of
-    reachable faces."""
+    face that passes the solvability checks (``envs.insertion.face_checks_of``: the arm can hold it over its socket,
+    and it lies tall enough to grip). The layout's ``feasibility`` dict (on the first peg's ``info``,
+    ``feasibility_record``) records how many draws it took and each socket's count of faces passing each check."""
     origin = np.eye(4)
     origin[:2, 3] = PANEL_TARGET_XY
     for draw in range(MAX_SET_DRAWS):
@@ -88,9 +89,9 @@ def reachable_solar_set(seed: int, clearance: float, arm_base: np.ndarray) -> tu
         layout = make_solar_layout(draw_seed, clearance)
         pegs = make_solar_pegs(layout, draw_seed)
         frames = socket_frames(layout)
-        faces = [reachable_faces_of(peg, origin @ frames[f"bottom_{i}"], arm_base) for i, peg in enumerate(pegs)]
-        if all(bool(f.any()) for f in faces):
-            pegs[0].info["feasibility"] = {"draws": draw + 1, "reachable_resting_faces": [int(f.sum()) for f in faces]}
+        checks = [face_checks_of(peg, origin @ frames[f"bottom_{i}"], arm_base) for i, peg in enumerate(pegs)]
+        if all(bool(c["insertable"].any()) for c in checks):
+            pegs[0].info["feasibility"] = feasibility_record(draw + 1, checks)
             return layout, pegs
     raise RuntimeError(f"no procedural solar set the arm can assemble in {MAX_SET_DRAWS} draws from seed {seed}")
 
@@ -113,8 +114,9 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       longer), sockets 20-30 mm deep with `clearance` (default 1 mm, at most 1.96 mm), and the panel's size (0.9-1.1x per side,
       the sockets and receptacles moving with it)
     - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg
-      (for procedural sets, only on a side from which the arm can hold it over its socket:
-      `envs.insertion.reachable_faces`; a set with a peg that has none is drawn again);
+      (for procedural sets, only on a side that passes the solvability checks, `envs.insertion.face_checks_of`:
+      the arm can hold it over its socket, and it lies at least 1 cm tall for the fingers; a set with a peg that
+      has none is drawn again, and the first peg's `info["feasibility"]` records the checks);
       the panel within 1 cm / 2 cm / 5 deg of its place on the deck
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
@@ -202,7 +204,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=device)
             for i, placement in enumerate(self._peg_placements):
                 insertion = self.insertion
-                placement.allow_only(reachable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
+                placement.allow_only(insertable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
         self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
         # the sockets each peg may fill: those of its length
         self._fits = self._socket_class[:, None] == self._socket_class[None, :]

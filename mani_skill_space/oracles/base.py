@@ -11,6 +11,7 @@ seed gives the same demonstration.
 
 from __future__ import annotations
 
+import itertools
 from contextlib import contextmanager
 from typing import Callable, Iterator, Optional
 
@@ -464,8 +465,6 @@ def _ground_points() -> np.ndarray:
 
 def open_finger_corners(env) -> np.ndarray:
     """Corners (k, 3) of the open fingers' collision boxes in the TCP frame (the gripper as it is at reset: open)."""
-    import itertools
-
     to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
     corners = []
     for link in env.agent.robot.links:
@@ -477,6 +476,44 @@ def open_finger_corners(env) -> np.ndarray:
             frame = to_tcp @ (entity.pose * shape.get_local_pose()).to_transformation_matrix()
             corners.append(box @ frame[:3, :3].T + frame[:3, 3])
     return np.concatenate(corners)
+
+
+def finger_pad_rectangle(env) -> np.ndarray:
+    """The open finger pads' inner faces as a rectangle in the TCP frame's (x, z) plane: ``[[x_min, z_min], [x_max,
+    z_max]]`` (the fingers' collision box nearest the closing axis, the pad, of the gripper as it is at reset)."""
+    to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
+    pads = []
+    for link in env.agent.robot.links:
+        if "finger" not in link.name:
+            continue
+        entity = link._objs[0].entity
+        for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
+            box = np.array(list(itertools.product(*[(-h, h) for h in shape.half_size])))
+            frame = to_tcp @ (entity.pose * shape.get_local_pose()).to_transformation_matrix()
+            corners = box @ frame[:3, :3].T + frame[:3, 3]
+            pads.append((np.abs(corners[:, 1]).min(), corners))
+    corners = min(pads, key=lambda pad: pad[0])[1]
+    return np.stack([corners[:, [0, 2]].min(axis=0), corners[:, [0, 2]].max(axis=0)])
+
+
+def pad_overlap(hand: sapien.Pose, points: np.ndarray, pad: np.ndarray) -> float:
+    """The share of a finger pad's face (``pad``, as ``finger_pad_rectangle`` gives it) that closes on the convex
+    object whose vertices are ``points`` (k, 3, world) with the hand at ``hand``: the overlap of the pad with the
+    object's silhouette seen along the closing axis. Near 0 the fingers close on an edge or beside the object
+    and flick it away; near 1 they hold it over their whole face."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    from mani_skill_space.procgen.polytope import clip
+
+    silhouette = ((points - hand.p) @ hand.to_transformation_matrix()[:3, :3])[:, [0, 2]]
+    for axis in (0, 1):
+        silhouette = clip(silhouette, -np.eye(2)[axis], -pad[0][axis])
+        silhouette = clip(silhouette, np.eye(2)[axis], pad[1][axis])
+    try:
+        area = ConvexHull(silhouette).volume if len(silhouette) >= 3 else 0.0
+    except QhullError:  # a flat overlap covers no area
+        area = 0.0
+    return float(area / np.prod(pad[1] - pad[0]))
 
 
 def collision_vertices(actor) -> np.ndarray:

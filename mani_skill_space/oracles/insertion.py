@@ -30,8 +30,10 @@ from mani_skill_space.oracles.base import (
     at_height,
     backed_off,
     collision_vertices,
+    finger_pad_rectangle,
     lowest_point,
     open_finger_corners,
+    pad_overlap,
     surface_points,
 )
 
@@ -50,10 +52,16 @@ it lightly: aimed at a flat peg's axis, a tilted or rolled hand would drive a fi
 ground and be thrown off."""
 HEAD_OVERHANG = 0.005
 """The grasp point may be this close to the peg's head: the pads may overhang its end."""
-GRASP_TILTS = np.radians([45.0, 30.0, 60.0])
-"""The hand takes the lying peg tilted toward the peg's tip by one of these angles (the first that works).
-Turned tip-down over the hole, the peg then hangs from a hand pointing below level, its body rising away from
-the module's top: a level hand would hit the block beside a short peg."""
+GRASP_TILTS = np.radians([45.0, 30.0, 60.0, 15.0, 0.0])
+"""The hand takes the lying peg tilted toward the peg's tip by one of these angles (the first that works and holds
+the peg firmly, see ``FIRM_PAD_OVERLAP``). Turned tip-down over the hole, the peg then hangs from a hand pointing
+below level, its body rising away from the module's top: a level hand would hit the block beside a short peg. The
+steeper hands (15 and 0 degrees) are for flat pegs: a tilted hand's fingertips reach the ground before its pads
+come down to a peg a centimetre thick."""
+FIRM_PAD_OVERLAP = 0.5
+"""A grasp whose finger pads meet the peg over at least this share of their faces (``base.pad_overlap``) holds it
+firmly; the others are tried after every firm one, those meeting more of it first (a grasp on the peg's edge or
+its end flicks it away as the fingers close, or lets it turn in the hand)."""
 GRASP_ROLLS = np.radians([0.0, 25.0, -25.0])
 """...and rolled about the peg's axis by one of these (from straight above first)."""
 HALF_TURN_ABOUT_APPROACH = np.array([0.0, 0.0, 0.0, 1.0])
@@ -139,6 +147,10 @@ class PegInserter:
         self.oracle, self.settings = oracle, settings
         self.reach_obstacles = reach_obstacles
         self.finger_corners = open_finger_corners(oracle.env)
+        self.finger_pad = finger_pad_rectangle(oracle.env)
+        self.planned_arm: Optional[np.ndarray] = None
+        """The arm configuration over the hole that the plan found (its IK seeds the line-up with the peg as it
+        really sits in the hand: from elsewhere the solver may find no solution a few millimetres away)."""
 
     def _reaching(self):
         """Plan with the ``reach_obstacles`` too, inside the block."""
@@ -204,7 +216,7 @@ class PegInserter:
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
-        for grasp, checked in self._grasp_candidates(target, tip):
+        for grasp, checked in self._grasp_candidates(target, tip, peg_points):
             if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
             with self._reaching():
@@ -223,6 +235,7 @@ class PegInserter:
                 with self._reaching():
                     found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
                 if found is not None:
+                    self.planned_arm = found
                     return grasp, float(twist)
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
@@ -270,25 +283,39 @@ class PegInserter:
         bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
         pressed = hand(push_to)
-        arms = [arm for arm in self.oracle.ik_solutions(hand(depth + APPROACH_GAP)) if start is None or self.oracle.path_is_free(start, arm)]
+        over = hand(depth + APPROACH_GAP)
+        solutions = self.oracle.ik_solutions(over)
+        if self.planned_arm is not None:
+            solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
+        arms = [arm for arm in solutions if start is None or self.oracle.path_is_free(start, arm)]
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             return next((arm for arm in arms if self.oracle.screw_is_feasible(arm, pressed)), None)
 
-    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray) -> Iterator[tuple[sapien.Pose, bool]]:
-        """Hand poses taking the lying peg, most natural first: every grasp tilt, then the hand rolled about the
-        peg's axis, each also turned a half turn about its approach (the same grip, another wrist angle); then
-        all of these again farther from the tip, where the hole is tilted (see ``_surface_rise``). Each comes with
-        whether its fingers must be checked (``_fingers_meet_sides``, ``_fingers_clear_surface``): the last
-        resort, the first grasps again, is not (the checks are conservative: a grasp that fails them may still
-        get the peg 90% of the way in)."""
+    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> Iterator[tuple[sapien.Pose, bool]]:
+        """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp
+        tilt, then the hand rolled about the peg's axis, each also turned a half turn about its approach (the same
+        grip, another wrist angle); then all of these again farther from the tip, where the hole is tilted (see
+        ``_surface_rise``). Those whose pads meet the peg firmly (``FIRM_PAD_OVERLAP``) come first, in that order,
+        then the others, those meeting more of the peg first; a grasp whose pads miss the peg altogether is never
+        tried. Each comes with whether its fingers must be checked (``_fingers_meet_sides``,
+        ``_fingers_clear_surface``): the last resort, the first grasps again, is not (the checks are
+        conservative: a grasp that fails them may still get the peg 90% of the way in)."""
         rise = self._surface_rise(target)
-        rounds = [(0.0, True), (rise, True), (0.0, False)] if rise > FINGER_MARGIN else [(0.0, True), (0.0, False)]
-        for extra_reach, checked in rounds:
+        reaches = (0.0, rise) if rise > FINGER_MARGIN else (0.0,)
+        candidates = []
+        for extra_reach in reaches:
             for roll in GRASP_ROLLS:
                 for tilt in GRASP_TILTS:
                     grasp = self._grasp_pose(target, tip, tilt, roll, extra_reach)
-                    yield grasp, checked
-                    yield grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH), checked
+                    for pose in (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)):
+                        candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad), extra_reach == 0.0))
+        firm = [(pose, near) for pose, overlap, near in candidates if overlap >= FIRM_PAD_OVERLAP]
+        weak = [(pose, near) for pose, overlap, near in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
+        for pose, _ in firm + weak:
+            yield pose, True
+        for pose, near in firm + weak:
+            if near:
+                yield pose, False
 
     @staticmethod
     def _surface_rise(target: PegTarget) -> float:

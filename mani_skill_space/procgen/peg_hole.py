@@ -135,7 +135,13 @@ def make_peg(profile: PegProfile, name: str = "peg") -> Asset:
         density=PEG_DENSITY,
         friction=METAL_FRICTION,
         frames={f"end_{i}": frame for i, frame in enumerate(ends)},
-        info={"symmetry_order": profile.symmetry_order, "ends": len(ends), "radius": profile.radius, "height": profile.height},
+        info={
+            "symmetry_order": profile.symmetry_order,
+            "ends": len(ends),
+            "radius": profile.radius,
+            "height": profile.height,
+            "profile": {"sides": 0 if profile.circle else profile.sides, "taper": profile.taper, "aspect": profile.aspect},
+        },
     )
 
 

@@ -19,7 +19,8 @@ MIN_PIECE_VOLUME = 1e-10
 
 
 def clip(vertices: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Vertices of the convex polytope ``hull(vertices) ∩ {x : normal . x <= offset}`` (empty when none)."""
+    """Vertices of the convex polytope ``hull(vertices) ∩ {x : normal . x <= offset}`` (empty when none; in any
+    dimension: a polygon's vertices (k, 2) give a polygon)."""
     if len(vertices) == 0:
         return vertices
     side = vertices @ normal - offset
@@ -27,12 +28,12 @@ def clip(vertices: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
     if not outside.any():
         return vertices
     if not inside.any():
-        return np.empty((0, 3))
+        return np.empty((0, vertices.shape[1]))
     a, b = vertices[inside], vertices[outside]
     sa, sb = side[inside][:, None], side[outside][None, :]
     # every segment from a kept to a dropped vertex crosses the plane; the crossings include those of the edges
     t = (sa / (sa - sb))[..., None]
-    crossings = (a[:, None, :] + t * (b[None, :, :] - a[:, None, :])).reshape(-1, 3)
+    crossings = (a[:, None, :] + t * (b[None, :, :] - a[:, None, :])).reshape(-1, vertices.shape[1])
     return hull_vertices(np.concatenate([a, crossings]))
 
 
@@ -41,7 +42,7 @@ def hull_vertices(points: np.ndarray) -> np.ndarray:
     try:
         return points[ConvexHull(points).vertices]
     except (QhullError, ValueError):
-        return np.empty((0, 3))
+        return np.empty((0, points.shape[1]))
 
 
 def volume(vertices: np.ndarray) -> float:

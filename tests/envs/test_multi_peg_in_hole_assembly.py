@@ -37,7 +37,7 @@ def test_four_pegs_lie_at_rest_in_front_of_four_modules(asset_source):
     u = env.unwrapped
     assert len(u.pegs) == len(u.hole_modules) == PAIR_COUNT
     modules = torch.stack([module.pose.p[0] for module in u.hole_modules])
-    np.testing.assert_allclose(modules.numpy(), module_positions(), atol=1e-6)
+    np.testing.assert_allclose(modules.numpy(), module_positions(asset_source), atol=1e-6)
     pegs = torch.stack([peg.pose.p[0] for peg in u.pegs])
     assert torch.all(pegs[:, 0] < modules[:, 0] - 0.2)
     assert torch.all(pegs[:-1, 1] > pegs[1:, 1])  # each in its own lane, in the modules' order

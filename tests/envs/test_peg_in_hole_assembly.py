@@ -5,7 +5,7 @@ import sapien
 import torch
 
 from mani_skill_space.envs import PegInHoleAssemblyEnv
-from mani_skill_space.envs.peg_in_hole_assembly import MODULE_POSITION
+from mani_skill_space.envs.peg_in_hole_assembly import module_position
 
 ENV_ID = "PegInHoleAssembly-v1"
 DOMAINS = PegInHoleAssemblyEnv.SUPPORTED_DOMAINS
@@ -64,7 +64,7 @@ def test_peg_starts_at_rest_lying_in_front_of_the_module(asset_source):
             assert torch.linalg.norm(u.peg.pose.p - start[:, :3]).item() < 0.005, (domain, seed)
             tip = u.peg_end_frames()[0, 0, 0]
             assert abs(tip[2, 2].item()) < 0.35  # lying: the axis is roughly horizontal
-            assert 0.24 - 0.005 <= MODULE_POSITION[0] - u.peg.pose.p[0, 0].item() <= 0.28 + 0.005
+            assert 0.24 - 0.005 <= module_position(asset_source)[0] - u.peg.pose.p[0, 0].item() <= 0.28 + 0.005
         env.close()
 
 

@@ -1,12 +1,14 @@
-"""Procedural Peg-in-Hole instances are reachable by construction: a peg lies only on faces from which the arm can
-hold it over its hole (``envs.insertion.reachable_faces``), and a pair with no such face is drawn again."""
+"""Procedural Peg-in-Hole instances pass the solvability checks by construction: a peg lies only on faces from which
+the arm can hold it over its hole (``envs.insertion.reachable_faces``) and that leave it tall enough to grip
+(``grippable_faces``), and a pair with no such face is drawn again."""
 
 import numpy as np
 import pytest
 import torch
+from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 
-from mani_skill_space.envs.insertion import peg_placement, reachable_faces
-from mani_skill_space.envs.peg_in_hole_assembly import MODULE_POSITION, reachable_peg_hole_pair
+from mani_skill_space.envs.insertion import MIN_GRIP_HEIGHT, grippable_faces, insertable_faces, peg_placement, reachable_faces
+from mani_skill_space.envs.peg_in_hole_assembly import PROCEDURAL_MODULE_POSITION, reachable_peg_hole_pair
 from mani_skill_space.procgen.mounts import make_rover
 from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
 
@@ -28,7 +30,7 @@ def _faces(pegs, bottoms, symmetry):
 
 def _world_bottom(hole) -> np.ndarray:
     module = np.eye(4)
-    module[:3, 3] = MODULE_POSITION
+    module[:3, 3] = PROCEDURAL_MODULE_POSITION
     return module @ hole.frames["bottom"]
 
 
@@ -77,21 +79,50 @@ def test_face_down_picks_only_allowed_faces_deterministically():
         placement.allow_only(torch.zeros_like(allowed))
 
 
-def test_every_procedural_pair_has_a_reachable_face_and_records_its_check():
+def _lying_heights(peg) -> np.ndarray:
+    """How tall the peg stands lying on each of its resting faces."""
+    placement = peg_placement([peg], "cpu")
+    rest = quaternion_to_matrix(placement.quaternions[0, : int(placement.counts[0])]).numpy()
+    heights = np.einsum("fj,pj->fp", rest[:, 2, :], peg.collision_vertices)
+    return heights.max(axis=1) - heights.min(axis=1)
+
+
+def test_grippable_faces_are_those_the_peg_lies_at_least_a_centimetre_tall_on():
+    from mani_skill_space.procgen.peg_hole import PegProfile, make_peg
+
+    flat = make_peg(PegProfile(sides=4, circle=False, radius=0.02, height=0.06, taper=0.0, aspect=0.2, aspect_angle=np.pi / 4))
+    round_peg = make_peg(PegProfile(sides=32, circle=True, radius=0.015, height=0.06, taper=0.0, aspect=1.0, aspect_angle=0.0))
+    faces = grippable_faces(peg_placement([flat, round_peg], "cpu"))
+    flat_heights = _lying_heights(flat)
+    # the flat peg (a 5.7 x 28 mm section) may stand on its narrow sides only
+    assert flat_heights.min() < MIN_GRIP_HEIGHT < flat_heights.max()
+    assert faces[0, : len(flat_heights)].tolist() == (flat_heights >= MIN_GRIP_HEIGHT).tolist()
+    assert bool(faces[1, : len(_lying_heights(round_peg))].all())
+    assert not bool(faces[0, len(flat_heights) :].any()) and not bool(faces[1, len(_lying_heights(round_peg)) :].any())  # padding
+
+
+def test_every_procedural_pair_has_an_insertable_face_and_records_its_checks():
     arm = ARM_BASE.numpy()
     for seed in range(40):
         peg, hole = reachable_peg_hole_pair(seed, 0.001, arm)
         record = hole.info["feasibility"]
-        assert record["reachable_resting_faces"] >= 1 and record["draws"] >= 1
-        faces = _faces([peg], [_world_bottom(hole)], [peg.info["symmetry_order"]])
-        assert int(faces.sum()) == record["reachable_resting_faces"]
+        assert record["checks"] == ["grippable", "insertable", "reachable"] and record["draws"] >= 1
+        assert record["insertable_resting_faces"][0] >= 1
+        as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)  # noqa: E731
+        placement = peg_placement([peg], "cpu")
+        insertable = insertable_faces(placement, as_tensor(peg.frames["end_0"])[None], as_tensor(_world_bottom(hole))[None], torch.tensor([peg.info["symmetry_order"]]), ARM_BASE)
+        reachable = _faces([peg], [_world_bottom(hole)], [peg.info["symmetry_order"]])
+        assert int(insertable.sum()) == record["insertable_resting_faces"][0]
+        assert int(reachable.sum()) == record["reachable_resting_faces"][0]
+        assert int(grippable_faces(placement).sum()) == record["grippable_resting_faces"][0]
+        assert (_lying_heights(peg)[insertable[0, : record["resting_faces"][0]].numpy()] >= MIN_GRIP_HEIGHT).all()
         if record["draws"] == 1:
             assert peg.name == make_peg_hole_pair(seed)[0].name  # a pair that passes is the seed's own
 
 
-def test_every_procedural_solar_set_has_a_reachable_face_for_each_peg():
+def test_every_procedural_solar_set_has_an_insertable_face_for_each_peg():
     from mani_skill_space.envs.solar_panel_assembly import PANEL_TARGET_XY, reachable_solar_set
-    from mani_skill_space.envs.insertion import reachable_faces_of
+    from mani_skill_space.envs.insertion import face_checks_of
     from mani_skill_space.procgen.solar_panel import socket_frames
 
     origin = np.eye(4)
@@ -100,5 +131,7 @@ def test_every_procedural_solar_set_has_a_reachable_face_for_each_peg():
         layout, pegs = reachable_solar_set(seed, 0.001, ARM_BASE.numpy())
         record = pegs[0].info["feasibility"]
         frames = socket_frames(layout)
-        counts = [int(reachable_faces_of(peg, origin @ frames[f"bottom_{i}"], ARM_BASE.numpy()).sum()) for i, peg in enumerate(pegs)]
-        assert counts == record["reachable_resting_faces"] and min(counts) >= 1
+        checks = [face_checks_of(peg, origin @ frames[f"bottom_{i}"], ARM_BASE.numpy()) for i, peg in enumerate(pegs)]
+        for name in ("reachable", "grippable", "insertable"):
+            assert [int(c[name].sum()) for c in checks] == record[f"{name}_resting_faces"]
+        assert min(record["insertable_resting_faces"]) >= 1
