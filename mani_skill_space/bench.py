@@ -179,10 +179,10 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
         generators[f"terrain ({name})"] = lambda seed, n=name: make_terrain(seed, DOMAINS[n].terrain)
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     arm_base = make_rover().frames["arm_mount"][:3, 3]
-    generators["peg and hole pair (as the env draws it: reachability check, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
+    generators["peg and hole pair (as the env draws it: solvability checks, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
-    generators["solar panel set (as the env draws it: reachability check, redraws)"] = lambda seed: _reachable_solar_panel_set(seed, arm_base)
+    generators["solar panel set (as the env draws it: solvability checks, redraws)"] = lambda seed: _reachable_solar_panel_set(seed, arm_base)
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")

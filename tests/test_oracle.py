@@ -129,3 +129,31 @@ def test_of_two_alike_grasps_the_one_the_hand_turns_less_to_reach_comes_first():
         np.testing.assert_allclose(second.to_transformation_matrix()[:3, 1], -first.to_transformation_matrix()[:3, 1], atol=1e-9)
         np.testing.assert_allclose(first.to_transformation_matrix()[:3, 2], pose.to_transformation_matrix()[:3, 2], atol=1e-9)
     env.close()
+
+
+PAD = np.array([[-0.01, -0.01], [0.01, 0.01]])
+
+
+def _box(half, centre=(0.0, 0.0, 0.0)):
+    return np.array([[x, y, z] for x in (-half[0], half[0]) for y in (-half[1], half[1]) for z in (-half[2], half[2])]) + np.asarray(centre)
+
+
+@pytest.mark.parametrize(
+    "box, gap, overlap",
+    [
+        (_box((0.05, 0.01, 0.05)), None, 1.0),  # covers the whole pad
+        (_box((0.05, 0.01, 0.01), (0.0, 0.0, 0.01)), None, 0.5),  # its edge across the pad's middle
+        (_box((0.005, 0.01, 0.005)), None, 0.25),  # a small part in the middle
+        (_box((0.05, 0.01, 0.05), (0.0, 0.0, 0.2)), None, 0.0),  # beside the pad
+        (_box((0.05, 0.01, 0.05), (0.0, 0.2, 0.0)), None, 1.0),  # far along the closing axis, but in line with the pad
+        (_box((0.05, 0.01, 0.05), (0.0, 0.2, 0.0)), 0.04, 0.0),  # ... which is not between open fingers 4 cm apart
+        (_box((0.05, 0.01, 0.05), (0.0, 0.045, 0.0)), 0.04, 1.0),  # partly between them: its silhouette counts whole
+    ],
+)
+def test_pad_overlap_is_the_share_of_the_pad_the_object_covers_seen_along_the_closing_axis(box, gap, overlap):
+    from mani_skill_space.oracles.base import pad_overlap
+
+    assert pad_overlap(sapien.Pose(), box, PAD, gap) == pytest.approx(overlap, abs=1e-9)
+    turned = sapien.Pose([0.3, 0.1, 0.2], [0.7071068, 0.0, 0.0, 0.7071068])  # the hand and the box moved together
+    moved = box @ turned.to_transformation_matrix()[:3, :3].T + turned.p
+    assert pad_overlap(turned, moved, PAD, gap) == pytest.approx(overlap, abs=1e-6)

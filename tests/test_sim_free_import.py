@@ -17,7 +17,7 @@ def test_every_procgen_module_and_the_sim_free_maths_import_without_sapien_or_ma
         import mani_skill_space.procgen
         modules = [m.name for m in pkgutil.iter_modules(mani_skill_space.procgen.__path__, "mani_skill_space.procgen.")]
         assert len(modules) >= 14, modules
-        for name in [*modules, "mani_skill_space.domains", "mani_skill_space.rewards", "mani_skill_space.geometry", "mani_skill_space.levels", "mani_skill_space.factors", "mani_skill_space.delay", "mani_skill_space.kwarg_checks"]:
+        for name in [*modules, "mani_skill_space.domains", "mani_skill_space.rewards", "mani_skill_space.geometry", "mani_skill_space.levels", "mani_skill_space.factors", "mani_skill_space.delay", "mani_skill_space.kwarg_checks", "mani_skill_space.debris_paths"]:
             importlib.import_module(name)
         assert "sapien" not in sys.modules and "mani_skill" not in sys.modules
         mani_skill_space.procgen.rock.make_rock(0)

@@ -4,6 +4,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.debris_paths import CANDIDATE_STARTS, SHOULDER_HEIGHT, first_catchable, seconds_within_reach
 from mani_skill_space.envs.base import PENALTY_TERMS, SpaceManipulationEnv
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix, step_velocities
 from mani_skill_space.kwarg_checks import checked_number
@@ -129,32 +130,56 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         self._last_debris_pose = torch.zeros((self.num_envs, 7), device=self.device)
         self._debris_velocity = torch.zeros((self.num_envs, 3), device=self.device)
         self._debris_spin_velocity = torch.zeros((self.num_envs, 3), device=self.device)
+        self.start_checks = dict(
+            draws=torch.zeros(self.num_envs, dtype=torch.int32, device=self.device),
+            seconds_within_reach=torch.zeros(self.num_envs, device=self.device),
+        )
+        """Each env's episode start passed the solvability check (``debris_paths``): how many candidate starts were
+        drawn to find it, and how long its path stays within the arm's reach once the hand can be there."""
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
             b = len(env_idx)
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
-            as_tensor = lambda x: torch.as_tensor(x, dtype=torch.float32)  # noqa: E731
-            position = as_tensor(DEBRIS_START) + as_tensor(rng.uniform(-DEBRIS_START_SPREAD, DEBRIS_START_SPREAD, size=(3,)))
-            quaternion = as_tensor(rng.normal(size=(4,)))
-            quaternion = quaternion / torch.linalg.norm(quaternion, dim=-1, keepdim=True)
-            scale = SLOWEST_SPEED_SCALE + (1 - SLOWEST_SPEED_SCALE) * self.difficulty
-            velocity = torch.stack(
-                [-as_tensor(rng.uniform(*DRIFT_SPEED)), as_tensor(rng.uniform(-LATERAL_SPEED, LATERAL_SPEED)), as_tensor(rng.uniform(-LATERAL_SPEED, LATERAL_SPEED))],
-                dim=-1,
-            ) * scale
-            velocity = velocity + self._lob(position, velocity)
-            spin = as_tensor(rng.uniform(-TUMBLE_RATE, TUMBLE_RATE, size=(3,))) * self.difficulty
-            pose = Pose.create_from_pq(position.reshape(b, 3), quaternion.reshape(b, 4))
+            position, quaternion, velocity, spin = self._candidate_starts(rng, b)
+            seconds = seconds_within_reach(position, velocity, self._gravity(), self._shoulder(env_idx)[:, None])
+            pick = first_catchable(seconds)
+            choose = lambda x: x[torch.arange(b), pick]  # noqa: E731
+            position, quaternion, velocity, spin = choose(position), choose(quaternion), choose(velocity), choose(spin)
+            pose = Pose.create_from_pq(position, quaternion)
             self.debris.set_pose(pose)
-            self.debris.set_linear_velocity(velocity.reshape(b, 3))
-            self.debris.set_angular_velocity(spin.reshape(b, 3))
+            self.debris.set_linear_velocity(velocity)
+            self.debris.set_angular_velocity(spin)
+            self.start_checks["draws"][env_idx] = (pick + 1).int()
+            self.start_checks["seconds_within_reach"][env_idx] = choose(seconds)
             self._calm_steps[env_idx] = 0
             self._grasped[env_idx] = False
             self._last_debris_pose[env_idx] = pose.raw_pose
-            self._debris_velocity[env_idx] = velocity.reshape(b, 3)
-            self._debris_spin_velocity[env_idx] = spin.reshape(b, 3)
+            self._debris_velocity[env_idx] = velocity
+            self._debris_spin_velocity[env_idx] = spin
+
+    def _candidate_starts(self, rng, b: int) -> tuple[torch.Tensor, ...]:
+        """``CANDIDATE_STARTS`` starts per env (b, K, ...): position, wxyz orientation, drift (with the lob under
+        gravity) and tumble, each from the reference's ranges scaled by ``difficulty``."""
+        k = CANDIDATE_STARTS
+        as_tensor = lambda x: torch.as_tensor(x, dtype=torch.float32).reshape(b, k, -1).squeeze(-1)  # noqa: E731
+        position = torch.tensor(DEBRIS_START) + as_tensor(rng.uniform(-DEBRIS_START_SPREAD, DEBRIS_START_SPREAD, size=(k, 3)))
+        quaternion = as_tensor(rng.normal(size=(k, 4)))
+        quaternion = quaternion / torch.linalg.norm(quaternion, dim=-1, keepdim=True)
+        scale = SLOWEST_SPEED_SCALE + (1 - SLOWEST_SPEED_SCALE) * self.difficulty
+        drift = [-as_tensor(rng.uniform(*DRIFT_SPEED, size=(k,))), as_tensor(rng.uniform(-LATERAL_SPEED, LATERAL_SPEED, size=(k,))), as_tensor(rng.uniform(-LATERAL_SPEED, LATERAL_SPEED, size=(k,)))]
+        velocity = torch.stack(drift, dim=-1) * scale
+        velocity = velocity + self._lob(position, velocity)
+        spin = as_tensor(rng.uniform(-TUMBLE_RATE, TUMBLE_RATE, size=(k, 3))) * self.difficulty
+        return position, quaternion, velocity, spin
+
+    def _gravity(self) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(self.sim_config.scene_config.gravity), dtype=torch.float32, device=self.device)
+
+    def _shoulder(self, env_idx: torch.Tensor) -> torch.Tensor:
+        """(b, 3) the arm's shoulder joint, ``SHOULDER_HEIGHT`` above its base."""
+        return self.agent.robot.pose.p[env_idx] + torch.tensor([0.0, 0.0, SHOULDER_HEIGHT], device=self.device)
 
     def _lob(self, position: torch.Tensor, velocity: torch.Tensor) -> torch.Tensor:
         """Under gravity (the asteroid), the upward velocity that brings the debris back to its starting height

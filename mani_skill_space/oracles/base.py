@@ -496,16 +496,20 @@ def finger_pad_rectangle(env) -> np.ndarray:
     return np.stack([corners[:, [0, 2]].min(axis=0), corners[:, [0, 2]].max(axis=0)])
 
 
-def pad_overlap(hand: sapien.Pose, points: np.ndarray, pad: np.ndarray) -> float:
+def pad_overlap(hand: sapien.Pose, points: np.ndarray, pad: np.ndarray, gap: Optional[float] = None) -> float:
     """The share of a finger pad's face (``pad``, as ``finger_pad_rectangle`` gives it) that closes on the convex
     object whose vertices are ``points`` (k, 3, world) with the hand at ``hand``: the overlap of the pad with the
-    object's silhouette seen along the closing axis. Near 0 the fingers close on an edge or beside the object
-    and flick it away; near 1 they hold it over their whole face."""
+    object's silhouette seen along the closing axis (only of its part within ``gap`` of the hand's middle across
+    the fingers, where given: the part between the open fingers). Near 0 the fingers close on an edge or beside the
+    object and flick it away; near 1 they hold it over their whole face."""
     from scipy.spatial import ConvexHull, QhullError
 
     from mani_skill_space.procgen.polytope import clip
 
-    silhouette = ((points - hand.p) @ hand.to_transformation_matrix()[:3, :3])[:, [0, 2]]
+    local = (points - hand.p) @ hand.to_transformation_matrix()[:3, :3]
+    if gap is not None:
+        local = clip(clip(local, np.array([0.0, 1.0, 0.0]), gap), np.array([0.0, -1.0, 0.0]), gap)
+    silhouette = local[:, [0, 2]]
     for axis in (0, 1):
         silhouette = clip(silhouette, -np.eye(2)[axis], -pad[0][axis])
         silhouette = clip(silhouette, np.eye(2)[axis], pad[1][axis])
@@ -518,12 +522,17 @@ def pad_overlap(hand: sapien.Pose, points: np.ndarray, pad: np.ndarray) -> float
 
 def collision_vertices(actor) -> np.ndarray:
     """World positions (k, 3) of the vertices of an actor's (first env's) convex collision shapes."""
+    return np.concatenate(collision_part_vertices(actor))
+
+
+def collision_part_vertices(actor) -> list[np.ndarray]:
+    """World positions of the vertices of each of an actor's (first env's) convex collision shapes."""
     entity = actor._objs[0]
-    points = []
+    parts = []
     for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
         frame = (entity.pose * shape.get_local_pose()).to_transformation_matrix()
-        points.append((shape.get_vertices() * shape.get_scale()) @ frame[:3, :3].T + frame[:3, 3])
-    return np.concatenate(points)
+        parts.append((shape.get_vertices() * shape.get_scale()) @ frame[:3, :3].T + frame[:3, 3])
+    return parts
 
 
 def lowest_point(actor) -> float:

@@ -11,16 +11,10 @@ import numpy as np
 import sapien
 import torch
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed
+from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
 
-SHOULDER_HEIGHT = 0.333
-"""Height of the Panda's shoulder joint above its base."""
-REACH = (0.4, 0.8)
-"""Distances (m) from the shoulder at which the hand can meet the debris and still move back with it."""
-LOWEST_MEETING_HEIGHT = 0.12
-"""Meet the debris at least this high above the platform or ground (room for the hand below it)."""
 EARLIEST_MEETING = 0.8
-LATEST_MEETING = 8.0
 TIME_STEP = 0.1
 ARRIVAL_MARGIN = 0.6
 """Seconds the hand should be in place before the debris arrives."""
@@ -38,7 +32,14 @@ CATCH_SPEED = 0.08
 """How fast (m/s) the debris may close in on the hand while the hand moves with it."""
 CATCH_TIME = 0.15
 CLOSE_RADIUS = 0.012
-"""The fingers close once the debris' centre is this close (m) to the grasp point."""
+"""The fingers close once the debris' centre is this close (m) to the grasp point..."""
+CLOSE_PAD_OVERLAP = 0.35
+"""...or once it touches the hand with its parts between the open fingers covering this share of the finger pads
+(``base.pad_overlap``): a long body's centre may never come between them. (Closing as soon as anything touched the
+hand closed the fingers on nothing when a satellite's wing or antenna brushed a fingertip first; closing as soon
+as the pads would meet something, before it touched, closed them on its leading edge.)"""
+OPEN_FINGER_GAP = 0.04
+"""Half the gap (m) between the open fingers' pads."""
 BRAKE_STEPS = 12
 HOLD_STEPS = 60
 
@@ -83,12 +84,19 @@ class DebrisCaptureOracle(Oracle):
         hand = self._tcp_position()
         gap = position - hand
         distance = float(np.linalg.norm(gap))
-        if distance < CLOSE_RADIUS or self._touching(env):  # a long body may touch the palm before its centre is in
+        if distance < CLOSE_RADIUS or (self._touching(env) and self._between_pads(env) >= CLOSE_PAD_OVERLAP):
             self.gripper = GRIPPER_CLOSED
         if self.gripper != GRIPPER_CLOSED and self._tilt == 0.0:  # until they close, keep the fingers across it
             self._grip_orientation = self._across(meeting, self._long_axis(env, 0.0))
         catch_up = min(distance / CATCH_TIME, CATCH_SPEED) * gap / max(distance, 1e-9)
         return sapien.Pose(hand + (velocity + catch_up) * env.control_timestep, self._grip_orientation)
+
+    def _between_pads(self, env) -> float:
+        """How much of the finger pads the debris would meet if they closed now (its parts' overlaps, at most 1)."""
+        if not hasattr(self, "_finger_pad"):
+            self._finger_pad = finger_pad_rectangle(env)
+        hand = self.tcp_pose()
+        return min(1.0, sum(pad_overlap(hand, part, self._finger_pad, OPEN_FINGER_GAP) for part in collision_part_vertices(env.debris)))
 
     def _across(self, meeting: sapien.Pose, long_axis: np.ndarray) -> np.ndarray:
         """The meeting orientation turned about its approach axis so the fingers close across ``long_axis``,

@@ -21,6 +21,11 @@ its Panda links are a little slimmer than the simulated ones (the wrist by about
 reaches over the module's top to take a peg lying in front of it. (Pushing the peg in, the hand comes closer.)"""
 
 
+PEG_IN_HOLE_INSERTION = InsertionSettings(insert_step=0.004, refine_passes=1)
+"""A 10 s episode: the push goes down 4 mm a step after one re-measuring pass over the entrance (with the usual
+2.5 mm and two passes, most of the episodes that failed ran out of time)."""
+
+
 class PegInHoleOracle(Oracle):
     def plan(self, env) -> Iterator[np.ndarray]:
         target = PegTarget.of(env, env.peg, 0)
@@ -28,7 +33,7 @@ class PegInHoleOracle(Oracle):
         module[:3, 3] = env.hole_module.pose.p[0].cpu().numpy()
         self.make_solver(env, obstacles=surface_points(env.hole_assets[0], module))
         wide_module = surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN)
-        yield from PegInserter(self, reach_obstacles=wide_module).insert(target)
+        yield from PegInserter(self, PEG_IN_HOLE_INSERTION, reach_obstacles=wide_module).insert(target)
         yield from self.wait_for_success(20)
 
 

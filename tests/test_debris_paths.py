@@ -1,0 +1,59 @@
+"""The debris start check (``mani_skill_space.debris_paths``): batched, sim-free."""
+
+import torch
+
+from mani_skill_space.debris_paths import (
+    CANDIDATE_STARTS,
+    HAND_READY_TIME,
+    LATEST_MEETING,
+    MIN_SECONDS_WITHIN_REACH,
+    REACH,
+    SHOULDER_HEIGHT,
+    TIME_STEP,
+    first_catchable,
+    seconds_within_reach,
+)
+from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT
+
+SHOULDER = torch.tensor([0.0, 0.0, ARM_MOUNT_HEIGHT + SHOULDER_HEIGHT])
+ZERO_G = torch.zeros(3)
+
+
+def test_a_path_through_the_reach_shell_counts_the_time_it_spends_there():
+    # drifting straight at the shoulder along x at 0.1 m/s from 1.2 m: within 0.4-0.8 m for 4 s (t = 4..8 s)
+    seconds = seconds_within_reach(torch.tensor([1.2, 0.0, SHOULDER[2]]), torch.tensor([-0.1, 0.0, 0.0]), ZERO_G, SHOULDER)
+    assert abs(float(seconds) - 4.0) <= 2 * TIME_STEP
+
+
+def test_time_before_the_hand_is_ready_and_after_the_latest_meeting_does_not_count():
+    # inside the shell from the start, leaving it (toward the shoulder) at 1 s: none of it after HAND_READY_TIME
+    early = seconds_within_reach(torch.tensor([0.5, 0.0, SHOULDER[2]]), torch.tensor([-0.1, 0.0, 0.0]), ZERO_G, SHOULDER)
+    assert float(early) == 0.0
+    still = seconds_within_reach(torch.tensor([0.6, 0.0, SHOULDER[2]]), torch.zeros(3), ZERO_G, SHOULDER)
+    assert abs(float(still) - (LATEST_MEETING - HAND_READY_TIME)) <= 2 * TIME_STEP
+
+
+def test_out_of_reach_below_the_meeting_height_or_falling_through_the_ground_never_counts():
+    far = seconds_within_reach(torch.tensor([REACH[1] + 0.3, 0.0, SHOULDER[2]]), torch.zeros(3), ZERO_G, SHOULDER)
+    low = seconds_within_reach(torch.tensor([0.6, 0.0, 0.05]), torch.zeros(3), ZERO_G, SHOULDER)
+    falling = seconds_within_reach(torch.tensor([0.6, 0.0, 0.5]), torch.zeros(3), torch.tensor([0.0, 0.0, -9.81]), SHOULDER)
+    assert float(far) == float(low) == 0.0
+    assert float(falling) == 0.0  # it is on the ground before the hand is ready
+
+
+def test_batched_over_envs_and_candidates():
+    generator = torch.Generator().manual_seed(0)
+    position = torch.rand(8, CANDIDATE_STARTS, 3, generator=generator) + torch.tensor([0.5, -0.5, 0.3])
+    velocity = (torch.rand(8, CANDIDATE_STARTS, 3, generator=generator) - 0.5) * 0.4
+    shoulders = SHOULDER + torch.rand(8, 1, 3, generator=generator) * 0.01
+    seconds = seconds_within_reach(position, velocity, ZERO_G, shoulders)
+    assert seconds.shape == (8, CANDIDATE_STARTS)
+    for env in (0, 5):
+        for k in (0, 3):
+            single = seconds_within_reach(position[env, k], velocity[env, k], ZERO_G, shoulders[env, 0])
+            assert torch.isclose(single, seconds[env, k])
+
+
+def test_the_first_catchable_start_is_kept_else_the_longest():
+    seconds = torch.tensor([[0.0, MIN_SECONDS_WITHIN_REACH, 3.0], [2.0, 0.5, 3.0], [0.2, 1.0, 0.4]])
+    assert first_catchable(seconds).tolist() == [1, 0, 1]
