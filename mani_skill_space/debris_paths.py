@@ -8,6 +8,7 @@ meeting point (``oracles.debris_capture``).
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT
@@ -54,3 +55,41 @@ def first_catchable(seconds: torch.Tensor) -> torch.Tensor:
     catchable = seconds >= MIN_SECONDS_WITHIN_REACH
     first = catchable.int().argmax(dim=-1)
     return torch.where(catchable.any(dim=-1), first, seconds.argmax(dim=-1))
+
+
+def tumbling_rotations(rotation: np.ndarray, angular_velocity: np.ndarray, principal_inertia: np.ndarray, principal_axes: np.ndarray, times: np.ndarray, step: float = 0.005) -> np.ndarray:
+    """World rotations (T, 3, 3) at ``times`` (T,, seconds from now, ascending) of a free rigid body (no torque)
+    that now has ``rotation`` (3, 3, body to world) and world ``angular_velocity`` (3,), with ``principal_inertia``
+    (3,) about ``principal_axes`` (3, 3, columns, in the body frame): Euler's equations integrated (RK4 on the
+    principal-frame angular velocity, the exact rotation for each step's mean angular velocity). A body that does
+    not spin about a principal axis does not keep its angular velocity: its axes precess about its constant angular
+    momentum, which a prediction at constant angular velocity misses by a quarter turn within a second or two."""
+    inertia = np.asarray(principal_inertia, dtype=np.float64)
+    frame = np.asarray(rotation, dtype=np.float64) @ np.asarray(principal_axes, dtype=np.float64)  # principal frame to world
+    omega = frame.T @ np.asarray(angular_velocity, dtype=np.float64)  # in the principal frame
+
+    def euler(w: np.ndarray) -> np.ndarray:
+        return np.array([(inertia[1] - inertia[2]) * w[1] * w[2], (inertia[2] - inertia[0]) * w[2] * w[0], (inertia[0] - inertia[1]) * w[0] * w[1]]) / inertia
+
+    out, now = [], 0.0
+    for target in np.asarray(times, dtype=np.float64):
+        while now < target - 1e-12:
+            h = min(step, target - now)
+            k1 = euler(omega)
+            k2 = euler(omega + h / 2 * k1)
+            k3 = euler(omega + h / 2 * k2)
+            k4 = euler(omega + h * k3)
+            new_omega = omega + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            frame = frame @ _axis_angle_matrix((omega + new_omega) / 2 * h)
+            omega, now = new_omega, now + h
+        out.append(frame @ np.asarray(principal_axes, dtype=np.float64).T)  # back to body to world
+    return np.stack(out)
+
+
+def _axis_angle_matrix(rotation_vector: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(rotation_vector))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = rotation_vector / angle
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross

@@ -1,5 +1,6 @@
 """The debris start check (``mani_skill_space.debris_paths``): batched, sim-free."""
 
+import numpy as np
 import torch
 
 from mani_skill_space.debris_paths import (
@@ -12,6 +13,7 @@ from mani_skill_space.debris_paths import (
     TIME_STEP,
     first_catchable,
     seconds_within_reach,
+    tumbling_rotations,
 )
 from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT
 
@@ -57,3 +59,34 @@ def test_batched_over_envs_and_candidates():
 def test_the_first_catchable_start_is_kept_else_the_longest():
     seconds = torch.tensor([[0.0, MIN_SECONDS_WITHIN_REACH, 3.0], [2.0, 0.5, 3.0], [0.2, 1.0, 0.4]])
     assert first_catchable(seconds).tolist() == [1, 0, 1]
+
+
+def _rotation(axis, angle):
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+
+
+def test_a_free_axisymmetric_body_precesses_about_its_angular_momentum_as_it_should():
+    inertia = np.array([1.0e-4, 4.0e-4, 4.0e-4])  # a long body (the 3U CubeSat's shape): small inertia about its axis
+    axes = _rotation([1, 2, 3], 0.7)  # its principal axes in its own frame
+    start = _rotation([0.3, -1, 0.2], 1.1)
+    omega = np.array([-0.8, 1.85, 2.23])
+    times = np.array([0.25, 0.5, 1.0, 2.0])
+    rotations = tumbling_rotations(start, omega, inertia, axes, times)
+    world_inertia = lambda rotation: (rotation @ axes) @ np.diag(inertia) @ (rotation @ axes).T  # noqa: E731
+    momentum = world_inertia(start) @ omega
+    # the closed form for a body symmetric about its first principal axis: that axis turns about the angular
+    # momentum at |L| / I_transverse
+    symmetry_axis = start @ axes[:, 0]
+    for rotation, t in zip(rotations, times):
+        np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-9)
+        expected = _rotation(momentum, np.linalg.norm(momentum) / inertia[1] * t) @ symmetry_axis
+        np.testing.assert_allclose(rotation @ axes[:, 0], expected, atol=1e-4)
+
+
+def test_spinning_about_a_principal_axis_keeps_turning_about_it():
+    axes = np.eye(3)
+    rotations = tumbling_rotations(np.eye(3), np.array([0.0, 0.0, 2.0]), np.array([1.0, 2.0, 3.0]), axes, np.array([0.5, 1.5]))
+    for rotation, t in zip(rotations, (0.5, 1.5)):
+        np.testing.assert_allclose(rotation, _rotation([0, 0, 1], 2.0 * t), atol=1e-9)

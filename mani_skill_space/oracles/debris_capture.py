@@ -11,7 +11,7 @@ import numpy as np
 import sapien
 import torch
 
-from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT
+from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT, tumbling_rotations
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
 
 EARLIEST_MEETING = 0.8
@@ -24,6 +24,10 @@ SWEEP_TIME_STEP = 0.1
 HAND_LENGTH = 0.12
 """Debris farther than its radius plus this (m) from the grasp point cannot touch the hand waiting there."""
 TILTS = tuple(np.radians([0.0, 30.0, 60.0]))
+ALONG_THE_FINGERS = -1.0
+"""For a long body, first: the hand turned so that the body will lie along the finger pads' width, across both the
+closing and the approach (``_along_the_fingers``), so that it neither strikes the palm end first nor lies across
+the fingers' gap."""
 """Grasp orientations tried at each meeting point: fingers against the debris' velocity, then tilted toward
 pointing down."""
 MOST_FOLLOW_STEPS = 40
@@ -38,6 +42,10 @@ CLOSE_PAD_OVERLAP = 0.35
 (``base.pad_overlap``): a long body's centre may never come between them. (Closing as soon as anything touched the
 hand closed the fingers on nothing when a satellite's wing or antenna brushed a fingertip first; closing as soon
 as the pads would meet something, before it touched, closed them on its leading edge.)"""
+BROADSIDE_COSINE = 0.5
+"""A long body is first sought where its long axis makes at least 60 degrees with its path (it lies across it)."""
+ELONGATED_RATIO = 1.5
+"""A body whose longest side is this many times its middle one is long (the 3U CubeSat, the 200 mm peg)."""
 OPEN_FINGER_GAP = 0.04
 """Half the gap (m) between the open fingers' pads."""
 BRAKE_STEPS = 12
@@ -122,12 +130,35 @@ class DebrisCaptureOracle(Oracle):
         gravity = np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)
         shoulder = self.solver.base_pose.p + np.array([0.0, 0.0, SHOULDER_HEIGHT])
         start = self.arm_qpos()
-        for t in np.arange(EARLIEST_MEETING, LATEST_MEETING, TIME_STEP):
+        times = np.arange(EARLIEST_MEETING, LATEST_MEETING, TIME_STEP)
+        long_axes = self._long_axes(env, times)
+        # a long body is met first where it will lie across its path (so that it comes in between the open fingers
+        # rather than end first into the palm), with the hand turned so that it will lie along the pads; failing
+        # those, as a compact one
+        passes = ((True, True), (False, True), (False, False)) if self._elongated(env) else ((False, False),)
+        for broadside_only, along_the_fingers in passes:
+            found = self._search_meeting(env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only, along_the_fingers)
+            if found is not None:
+                return found
+        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
+        raise PlanningFailed("the debris never passes where the hand can meet it in time")
+
+    def _search_meeting(self, env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only: bool, along_the_fingers: bool):
+        """The first meeting (grasp pose, arm joints) on the predicted path, or None: where ``broadside_only``, only
+        where the long axis lies across the path; where ``along_the_fingers``, only hands that the body will lie
+        along (``_lies_along_the_fingers``), the first of them turned for it (``_along_the_fingers``)."""
+        for t, long_axis in zip(times, long_axes):
             point = position + velocity * t + 0.5 * gravity * t * t
             if point[2] < LOWEST_MEETING_HEIGHT or not REACH[0] <= np.linalg.norm(point - shoulder) <= REACH[1]:
                 continue
-            for tilt in TILTS:
-                for pose in self.closings_nearest_first(_facing(point, velocity + gravity * t, self._long_axis(env, t), tilt)):
+            heading = velocity + gravity * t
+            if broadside_only and abs(long_axis @ heading) > BROADSIDE_COSINE * np.linalg.norm(heading):
+                continue
+            for tilt in (ALONG_THE_FINGERS, *TILTS) if along_the_fingers else TILTS:
+                facing = _along_the_fingers(point, heading, long_axis) if tilt == ALONG_THE_FINGERS else _facing(point, heading, long_axis, tilt)
+                if along_the_fingers and not _lies_along_the_fingers(facing, long_axis):
+                    continue
+                for pose in self.closings_nearest_first(facing):
                     for arm in self.ik_solutions(pose):
                         path = self._timed_path(start, arm)
                         if not self._arrives_in_time(path, t):  # pacing would not make it shorter
@@ -139,8 +170,7 @@ class DebrisCaptureOracle(Oracle):
                             self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
                             self._tilt = tilt
                             return pose, arm
-        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
-        raise PlanningFailed("the debris never passes where the hand can meet it in time")
+        return None
 
     def _arrives_in_time(self, path: np.ndarray, meeting_time: float) -> bool:
         """Whether the hand, moving along ``path`` (one target per control step), is in place ``ARRIVAL_MARGIN``
@@ -188,19 +218,63 @@ class DebrisCaptureOracle(Oracle):
         return any(float(torch.linalg.norm(env.scene.get_pairwise_contact_forces(link, env.debris)[0])) > 0 for link in links)
 
     @staticmethod
-    def _long_axis(env, time: float) -> np.ndarray:
-        """The debris' longest axis (its bounding box's) as it will point at ``time``, turning at its present
-        angular velocity."""
+    def _long_axis(env, time: float = 0.0) -> np.ndarray:
+        """The debris' longest axis (its bounding box's) as it will point at ``time``, tumbling freely."""
+        return DebrisCaptureOracle._long_axes(env, np.array([time]))[0]
+
+    @staticmethod
+    def _long_axes(env, times: np.ndarray) -> np.ndarray:
+        """(T, 3) the debris' longest axis (its bounding box's) at each of ``times`` (ascending, seconds from now),
+        tumbling freely from its present angular velocity (``debris_paths.tumbling_rotations``: Euler's equations
+        with its own inertia, not a constant angular velocity)."""
         from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
 
         box = get_actor_obb(env.debris)
         axis = np.asarray(box.primitive.transform)[:3, int(np.argmax(box.primitive.extents))]
-        spin = env.debris.angular_velocity[0].cpu().numpy().astype(np.float64) * time
-        return sapien.Pose(q=_axis_angle_quaternion(spin)).to_transformation_matrix()[:3, :3] @ axis
+        rotation = env.debris.pose.sp.to_transformation_matrix()[:3, :3]
+        body = env.debris._bodies[0]
+        principal_axes = sapien.Pose(q=body.cmass_local_pose.q).to_transformation_matrix()[:3, :3]
+        spin = env.debris.angular_velocity[0].cpu().numpy().astype(np.float64)
+        return tumbling_rotations(rotation, spin, np.asarray(body.inertia), principal_axes, times) @ (rotation.T @ axis)
+
+    @staticmethod
+    def _elongated(env) -> bool:
+        from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
+
+        extents = np.sort(np.asarray(get_actor_obb(env.debris).primitive.extents))
+        return bool(extents[2] >= ELONGATED_RATIO * extents[1])
 
     @staticmethod
     def _debris_state(env) -> tuple[np.ndarray, np.ndarray]:
         return env.debris.pose.p[0].cpu().numpy().astype(np.float64), env.debris.linear_velocity[0].cpu().numpy().astype(np.float64)
+
+
+def _lies_along_the_fingers(hand: sapien.Pose, long_axis: np.ndarray) -> bool:
+    """Whether a long body with ``long_axis`` lies more along the pads' width than along the hand's approach (end
+    first into the palm) or its closing axis (across the fingers' gap, which it is longer than)."""
+    frame = hand.to_transformation_matrix()[:3, :3]
+    cosines = np.abs(frame.T @ (long_axis / np.linalg.norm(long_axis)))
+    return bool(cosines[0] >= max(cosines[1], cosines[2]))
+
+
+def _along_the_fingers(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray) -> sapien.Pose:
+    """A grasp pose at ``point`` for a long body arriving with ``velocity``, its ``long_axis`` along the hand's x
+    (the pads' width): the hand faces the body as squarely as it can across that axis, so that a body arriving
+    broadside comes straight into the open hand and one arriving end first slides along the channel between the
+    pads; seen from above where it arrives end first along a level path."""
+    axis = long_axis / np.linalg.norm(long_axis)
+    approach = None
+    for wanted in (-velocity / np.linalg.norm(velocity), np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0])):
+        across = wanted - (wanted @ axis) * axis
+        if np.linalg.norm(across) >= 0.3:
+            approach = across / np.linalg.norm(across)
+            break
+    closing = np.cross(approach, axis)
+    closing /= np.linalg.norm(closing)
+    frame = np.eye(4)
+    frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    frame[:3, 3] = point
+    return sapien.Pose(frame)
 
 
 def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt: float = 0.0) -> sapien.Pose:
@@ -226,10 +300,3 @@ def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt
     frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
     frame[:3, 3] = point
     return sapien.Pose(frame)
-
-
-def _axis_angle_quaternion(rotation: np.ndarray) -> np.ndarray:
-    angle = float(np.linalg.norm(rotation))
-    if angle < 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * rotation / angle])
