@@ -7,8 +7,8 @@ import sapien
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import _trapezoid, collision_vertices
-from mani_skill_space.oracles.insertion import GRASP_TILTS, PegInserter, PegTarget
+from mani_skill_space.oracles.base import _trapezoid
+from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
 
@@ -96,23 +96,53 @@ def test_paced_motions_ramp_up_to_full_pace_and_down_again(distance):
     assert np.all(np.diff(half) >= -1e-12) and np.all(np.diff(half) <= 0.2 + 1e-9)  # no jolt: 1/5 of the pace a step
 
 
-def test_insertion_grasps_keep_both_fingers_on_a_flat_peg():
-    """A hand rolled over a flat peg holds one finger above it (the grasp misses): such grasps are not tried."""
+@pytest.fixture(scope="module")
+def inserter():
     env = gym.make("PegInHoleAssembly-v1", domain="earth", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
-    env.reset(seed=50000, options=dict(reconfigure=True))  # an 8 mm thick peg, 45 mm wide, lying flat
+    env.reset(seed=0)
     oracle = oracle_for("PegInHoleAssembly-v1")
-    oracle.reset(env, 50000)
+    oracle.reset(env, 0)
     oracle.make_solver(env.unwrapped)
-    inserter = PegInserter(oracle)
-    target = PegTarget.of(env.unwrapped, env.unwrapped.peg, 0)
-    tip = target.end_frames()[inserter._end_toward_arm(target)]
-    points = collision_vertices(target.peg)
-    assert points[:, 2].max() - points[:, 2].min() < 0.01
-    level = inserter._grasp_pose(target, tip, GRASP_TILTS[0], roll=0.0)
-    rolled = inserter._grasp_pose(target, tip, GRASP_TILTS[0], roll=np.radians(25.0))
-    assert inserter._fingers_meet_sides(level, points)
-    assert not inserter._fingers_meet_sides(rolled, points)
+    yield PegInserter(oracle)
     env.close()
+
+
+def _prism(section: np.ndarray, length: float = 0.06) -> np.ndarray:
+    """Vertices of a prism along the hand's x axis over ``section`` ((k, 2): y across the fingers, z along the approach)."""
+    return np.array([[x, y, z] for x in (-length / 2, length / 2) for y, z in section])
+
+
+def test_insertion_grasps_keep_both_fingers_on_a_flat_peg(inserter):
+    """A hand rolled over a flat peg holds one finger above it (the grasp misses): such grasps come last."""
+    flat = _prism(np.array([[-0.02, 0.0], [0.02, 0.0], [0.02, 0.005], [-0.02, 0.005]]))  # lying on the ground, 5 mm thick
+    fingertip = inserter.finger_corners[:, 2].max()  # how far the fingers reach along the approach
+    down = sapien.Pose([0.0, 0.0, fingertip - 0.001], [0.0, 1.0, 0.0, 0.0])  # from straight above, fingers across it
+    assert inserter._fingers_meet_sides(down, flat)
+    rolled = down * sapien.Pose(q=[np.cos(np.radians(12.5)), np.sin(np.radians(12.5)), 0.0, 0.0])  # 25 deg about its axis
+    assert not inserter._fingers_meet_sides(rolled, flat)
+
+
+def test_grasps_whose_pads_press_squarely_on_the_pegs_sides_are_told_apart(inserter):
+    """Where the peg is widest across the fingers decides whether the pads press flat on it: a block's sides face the
+    pads; a triangle lying on a face is widest at its base, under the pads' lower edge, where a pad's edge would
+    press on a slanted face and wedge the peg out of the grip."""
+    (x_low, z_low), (x_high, z_high) = inserter.finger_pad
+    middle = (z_low + z_high) / 2
+    block = _prism(np.array([[-0.01, middle - 0.005], [0.01, middle - 0.005], [0.01, middle + 0.005], [-0.01, middle + 0.005]]))
+    triangle = _prism(np.array([[-0.012, z_high + 0.001], [0.012, z_high + 0.001], [0.0, z_low]]))
+    assert inserter._pads_square_on_sides(sapien.Pose(), block)
+    assert not inserter._pads_square_on_sides(sapien.Pose(), triangle)
+    assert inserter._pads_square_on_sides(sapien.Pose([0.0, 0.0, 0.004]), triangle)  # the hand 4 mm farther on: its base inside
+
+
+def test_the_push_slows_down_to_seat_the_peg_and_ends_just_past_the_bottom():
+    from mani_skill_space.oracles.insertion import PRESS_DEPTH, SEATING_HEIGHT, SEATING_STEP, _push_heights
+
+    heights = _push_heights(0.06, 0.004)
+    steps = -np.diff(np.concatenate([[0.06], heights]))
+    assert np.all(steps > 0) and heights[-1] == pytest.approx(-PRESS_DEPTH)
+    assert np.all(steps <= 0.004 + 1e-12)
+    assert np.all(steps[heights < SEATING_HEIGHT - 1e-9] <= SEATING_STEP + 1e-12)
 
 
 def test_of_two_alike_grasps_the_one_the_hand_turns_less_to_reach_comes_first():

@@ -67,7 +67,7 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     - the modules stand at x = 0.6 m (procedural; the dataset posts at 0.7 m, as in Peg-in-Hole), y = +-0.085 and
       +-0.255 m; each peg lies on a random stable side 0.24-0.28 m in front of its module, within +-2 cm of its
       centre line, its tip toward the arm within +-11 deg (for procedural pairs, only on a side from which the arm
-      can take it and hold it over its hole, and that leaves it at least 1 cm tall for the fingers)
+      can take it and hold it over its hole, and from which the fingers can hold it: `envs.insertion.face_checks_of`)
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
     **Success Conditions:**

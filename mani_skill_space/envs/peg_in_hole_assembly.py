@@ -91,7 +91,8 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       holes need the reach); the peg lies on a random stable side 0.24-0.28 m in front of the module, y within
       +-5 cm, its tip toward the arm within +-11 deg; for procedural pairs, only on a side that passes the
       solvability checks (`envs.insertion.face_checks_of`): the arm can take it there and hold it over the hole,
-      and it lies at least 1 cm tall, so the fingers can hold it; a pair with no such side is drawn again, and
+      and it lies at least 1 cm tall and not widest only at its base, so the fingers can hold it; a pair with no
+      such side is drawn again, and
       the module asset's `info["feasibility"]` records the checks
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 

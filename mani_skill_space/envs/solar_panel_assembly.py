@@ -115,7 +115,8 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       the sockets and receptacles moving with it)
     - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg
       (for procedural sets, only on a side that passes the solvability checks, `envs.insertion.face_checks_of`:
-      the arm can hold it over its socket, and it lies at least 1 cm tall for the fingers; a set with a peg that
+      the arm can hold it over its socket, and the fingers can hold it there (at least 1 cm tall, not widest only
+      at its base); a set with a peg that
       has none is drawn again, and the first peg's `info["feasibility"]` records the checks);
       the panel within 1 cm / 2 cm / 5 deg of its place on the deck
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints

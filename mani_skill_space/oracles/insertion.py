@@ -45,8 +45,10 @@ FINGER_MARGIN = 0.006
 SIDE_TOLERANCE = 0.001
 """m: the peg's points within this of its farthest point across the fingers are where a finger meets it."""
 PAD_HALF_WIDTH = 0.01
+PAD_EDGE_MARGIN = 0.002
+"""m: ``_pads_square_on_sides``: the peg's outermost edge must cross a pad's face at least this far inside its edges."""
 """Half the width of a Panda finger pad (m) beside the peg it grips."""
-FINGER_PRESS_DEPTH = 0.004
+FINGER_PRESS_DEPTH = 0.001
 """The hand aims its open fingers at most this far (m) below the surface the peg lies on, so that they press on
 it lightly: aimed at a flat peg's axis, a tilted or rolled hand would drive a finger a centimetre into the
 ground and be thrown off."""
@@ -72,8 +74,18 @@ APPROACH_GAP = 0.1
 """The arm swings the peg over the hole with its tip this far above the entrance, on the hole's axis."""
 PRE_INSERT_GAP = 0.03
 """How far above the entrance the tip is lined up before going in."""
-PRESS_DEPTH = 0.003
-"""The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home."""
+LINE_UP_GAPS = (APPROACH_GAP, 0.06, PRE_INSERT_GAP)
+"""Where the peg sits in the hand differently than planned and no arm configuration holds it ``APPROACH_GAP`` over
+the hole any more, the hand may come lower over it (a lower hand is nearer the arm's base)."""
+PRESS_DEPTH = 0.0005
+"""The push aims this far beyond the hole's bottom, so the arm keeps pressing the peg home. (Aimed 3 mm beyond it, the
+hand drove on after the peg had stopped and turned it between the fingers, past the 5 degrees the task allows, or
+the push was retried: on the tuning seeds 7 of 240 pegs were in and came out again.)"""
+SEATING_HEIGHT = 0.008
+SEATING_STEP = 0.0015
+"""The last ``SEATING_HEIGHT`` (m) above the bottom the push goes down at most this far a step: a peg that reaches
+the bottom at the full push's pace stops dead while the hand, a couple of steps behind its target, drives on, and
+the peg turns between the fingers (6-7 degrees, past the 5 the task allows) or springs back."""
 ENOUGH_DEPTH_LEFT = 0.05
 """A push whose tip stops this fraction of the depth above the bottom still inserts the peg (the task asks for
 90% of the depth)."""
@@ -195,10 +207,8 @@ class PegInserter:
         bottom, depth = target.bottom, target.depth
         for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
             yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
-        start, finish = depth + PRE_INSERT_GAP, -PRESS_DEPTH
-        steps = int(np.ceil((start - finish) / self.settings.insert_step))
-        height = lambda step: max(finish, start - (step + 1) * self.settings.insert_step)  # noqa: E731
-        yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, height(step))), steps + SETTLE_STEPS, "insert")
+        heights = _push_heights(depth + PRE_INSERT_GAP, self.settings.insert_step)
+        yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, heights[min(step, len(heights) - 1)])), len(heights) + SETTLE_STEPS, "insert")
 
     @staticmethod
     def _inserted_fraction(target: PegTarget, end: int) -> float:
@@ -253,6 +263,23 @@ class PegInserter:
                 return False
         return True
 
+    def _pads_square_on_sides(self, grasp: sapien.Pose, peg_points: np.ndarray) -> bool:
+        """Whether, on each side, the lying peg's outermost edge across the fingers (its collision vertices
+        ``peg_points`` within ``SIDE_TOLERANCE`` of the farthest) crosses the finger pad's face at least
+        ``PAD_EDGE_MARGIN`` inside its edges, so that the pads press flat on the peg. Where the pad's edge meets
+        a slanted face of the peg instead, the contact pushes along that face's normal and the squeeze wedges the
+        peg out of the grip as it is lifted."""
+        local = (peg_points - grasp.p) @ grasp.to_transformation_matrix()[:3, :3]
+        low, high = self.finger_pad[0] + PAD_EDGE_MARGIN, self.finger_pad[1] - PAD_EDGE_MARGIN
+        fractions = np.linspace(0.0, 1.0, 11)[:, None]
+        for side in (1.0, -1.0):
+            across = side * local[:, 1]
+            edge = local[across >= across.max() - SIDE_TOLERANCE][:, [0, 2]]
+            samples = np.concatenate([a + fractions * (b - a) for a in edge for b in edge])
+            if not np.any(np.all((samples >= low) & (samples <= high), axis=1)):
+                return False
+        return True
+
     def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail."""
         arm = start
@@ -268,22 +295,26 @@ class PegInserter:
         else the nearest other one the profile's symmetry allows."""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
-        # a push that stops just short of the bottom still inserts the peg: the last resort
-        for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
-            for candidate in twists:
-                arm = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to)
-                if arm is not None:
-                    return arm, float(candidate)
+        # a push that stops just short of the bottom still inserts the peg, and the hand may come lower over the
+        # hole, nearer the arm's reach: the last resorts
+        for approach_gap in LINE_UP_GAPS:
+            for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
+                for candidate in twists:
+                    arm = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
+                    if arm is not None:
+                        return arm, float(candidate)
         raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
 
-    def _insertion_arm(self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH) -> Optional[np.ndarray]:
-        """An arm configuration holding the tip over the hole on its axis (with ``tip_in_hand``) from which a
+    def _insertion_arm(
+        self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
+    ) -> Optional[np.ndarray]:
+        """An arm configuration holding the tip ``approach_gap`` over the hole on its axis (with ``tip_in_hand``) from which a
         straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it; None if there
         is none."""
         bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
         pressed = hand(push_to)
-        over = hand(depth + APPROACH_GAP)
+        over = hand(depth + approach_gap)
         solutions = self.oracle.ik_solutions(over)
         if self.planned_arm is not None:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
@@ -295,8 +326,9 @@ class PegInserter:
         """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp
         tilt, then the hand rolled about the peg's axis, each also turned a half turn about its approach (the same
         grip, another wrist angle); then all of these again farther from the tip, where the hole is tilted (see
-        ``_surface_rise``). Those whose pads meet the peg firmly (``FIRM_PAD_OVERLAP``) come first, in that order,
-        then the others, those meeting more of the peg first; a grasp whose pads miss the peg altogether is never
+        ``_surface_rise``). Those whose pads meet the peg firmly (``FIRM_PAD_OVERLAP``) come first, in that order
+        (those whose pads also press squarely on its sides, ``_pads_square_on_sides``, before the rest), then the
+        others, those meeting more of the peg first; a grasp whose pads miss the peg altogether is never
         tried. Each comes with whether its fingers must be checked (``_fingers_meet_sides``,
         ``_fingers_clear_surface``): the last resort, the first grasps again, is not (the checks are
         conservative: a grasp that fails them may still get the peg 90% of the way in)."""
@@ -310,6 +342,8 @@ class PegInserter:
                     for pose in (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)):
                         candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad), extra_reach == 0.0))
         firm = [(pose, near) for pose, overlap, near in candidates if overlap >= FIRM_PAD_OVERLAP]
+        square = [(pose, near) for pose, near in firm if self._pads_square_on_sides(pose, peg_points)]
+        firm = square + [candidate for candidate in firm if not any(candidate[0] is pose for pose, _ in square)]
         weak = [(pose, near) for pose, overlap, near in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
         for pose, _ in firm + weak:
             yield pose, True
@@ -401,6 +435,14 @@ def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
     """Where ``points`` (k, 3, world) lie along the hand's closing (y) axis, from its TCP."""
     return (points - hand.p) @ hand.to_transformation_matrix()[:3, 1]
+
+
+def _push_heights(start: float, step: float) -> np.ndarray:
+    """The tip's height above the hole's bottom at each step of a push from ``start``: down ``step`` a step to
+    ``SEATING_HEIGHT``, then ``SEATING_STEP`` a step to ``PRESS_DEPTH`` below the bottom."""
+    fast = np.arange(start - step, SEATING_HEIGHT, -step)
+    slow = np.arange(min(SEATING_HEIGHT, start), -PRESS_DEPTH, -SEATING_STEP)
+    return np.concatenate([fast, slow, [-PRESS_DEPTH]])
 
 
 def _twists(order: int) -> np.ndarray:

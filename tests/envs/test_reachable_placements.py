@@ -135,3 +135,16 @@ def test_every_procedural_solar_set_has_an_insertable_face_for_each_peg():
         for name in ("reachable", "grippable", "insertable"):
             assert [int(c[name].sum()) for c in checks] == record[f"{name}_resting_faces"]
         assert min(record["insertable_resting_faces"]) >= 1
+
+
+def test_a_peg_widest_only_at_its_base_is_not_grippable():
+    """A triangle lying on a face meets the closing fingers with its bottom edges only, which wedge it out of the grip;
+    a square lying on a face is widest over its whole height."""
+    from mani_skill_space.procgen.peg_hole import PegProfile, make_peg
+
+    triangle = make_peg(PegProfile(sides=3, circle=False, radius=0.02, height=0.06, taper=0.0, aspect=1.0, aspect_angle=0.0))
+    square = make_peg(PegProfile(sides=4, circle=False, radius=0.02, height=0.06, taper=0.0, aspect=1.0, aspect_angle=0.0))
+    faces = grippable_faces(peg_placement([triangle, square], "cpu"))
+    assert _lying_heights(triangle).min() >= MIN_GRIP_HEIGHT  # tall enough: it is the wedge that rules it out
+    assert not bool(faces[0].any())
+    assert bool(faces[1, : len(_lying_heights(square))].all())
