@@ -322,6 +322,16 @@ class Oracle(Policy):
                 return
             yield self.hold_action()
 
+    def first_reachable(self, poses: list[sapien.Pose], what: str, **motion) -> Iterator[np.ndarray]:
+        """``screw_to`` the first of ``poses`` the arm can move to from where it is (e.g. a retreat straight up, as far
+        as the arm goes); PlanningFailed if it can reach none."""
+        start = self.arm_qpos()
+        for pose in poses:
+            if self.motion_end(start, pose) is not None:
+                yield from self.screw_to(pose, what, **motion)
+                return
+        raise PlanningFailed(f"no motion to the {what} pose")
+
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
         PlanningFailed if it has not within ``most_steps``."""
