@@ -475,24 +475,20 @@ def _ground_points() -> np.ndarray:
 
 def open_finger_corners(env) -> np.ndarray:
     """Corners (k, 3) of the open fingers' collision boxes in the TCP frame (the gripper as it is at reset: open)."""
-    to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
-    corners = []
-    for link in env.agent.robot.links:
-        if "finger" not in link.name:
-            continue
-        entity = link._objs[0].entity
-        for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
-            box = np.array(list(itertools.product(*[(-h, h) for h in shape.half_size])))
-            frame = to_tcp @ (entity.pose * shape.get_local_pose()).to_transformation_matrix()
-            corners.append(box @ frame[:3, :3].T + frame[:3, 3])
-    return np.concatenate(corners)
+    return np.concatenate(_finger_box_corners(env))
 
 
 def finger_pad_rectangle(env) -> np.ndarray:
     """The open finger pads' inner faces as a rectangle in the TCP frame's (x, z) plane: ``[[x_min, z_min], [x_max,
     z_max]]`` (the fingers' collision box nearest the closing axis, the pad, of the gripper as it is at reset)."""
+    corners = min(_finger_box_corners(env), key=lambda box: np.abs(box[:, 1]).min())
+    return np.stack([corners[:, [0, 2]].min(axis=0), corners[:, [0, 2]].max(axis=0)])
+
+
+def _finger_box_corners(env) -> list[np.ndarray]:
+    """The corners (8, 3) of each of the fingers' collision boxes, in the TCP frame, with the gripper as it is now."""
     to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
-    pads = []
+    boxes = []
     for link in env.agent.robot.links:
         if "finger" not in link.name:
             continue
@@ -500,10 +496,8 @@ def finger_pad_rectangle(env) -> np.ndarray:
         for shape in entity.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).get_collision_shapes():
             box = np.array(list(itertools.product(*[(-h, h) for h in shape.half_size])))
             frame = to_tcp @ (entity.pose * shape.get_local_pose()).to_transformation_matrix()
-            corners = box @ frame[:3, :3].T + frame[:3, 3]
-            pads.append((np.abs(corners[:, 1]).min(), corners))
-    corners = min(pads, key=lambda pad: pad[0])[1]
-    return np.stack([corners[:, [0, 2]].min(axis=0), corners[:, [0, 2]].max(axis=0)])
+            boxes.append(box @ frame[:3, :3].T + frame[:3, 3])
+    return boxes
 
 
 def pad_overlap(hand: sapien.Pose, points: np.ndarray, pad: np.ndarray, gap: Optional[float] = None) -> float:

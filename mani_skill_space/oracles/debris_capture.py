@@ -269,12 +269,7 @@ def _along_the_fingers(point: np.ndarray, velocity: np.ndarray, long_axis: np.nd
         if np.linalg.norm(across) >= 0.3:
             approach = across / np.linalg.norm(across)
             break
-    closing = np.cross(approach, axis)
-    closing /= np.linalg.norm(closing)
-    frame = np.eye(4)
-    frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
-    frame[:3, 3] = point
-    return sapien.Pose(frame)
+    return _hand_pose(point, approach, np.cross(approach, axis))
 
 
 def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt: float = 0.0) -> sapien.Pose:
@@ -295,7 +290,13 @@ def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt
         down /= np.linalg.norm(down)
         approach = np.cos(tilt) * -along + np.sin(tilt) * down
         closing = np.cross(approach, along)
-    closing /= np.linalg.norm(closing)
+    return _hand_pose(point, approach, closing)
+
+
+def _hand_pose(point: np.ndarray, approach: np.ndarray, closing: np.ndarray) -> sapien.Pose:
+    """The TCP pose at ``point`` with its approach (z) and closing (y) axes (``closing`` made unit; it must be square
+    to ``approach``)."""
+    closing = closing / np.linalg.norm(closing)
     frame = np.eye(4)
     frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
     frame[:3, 3] = point
