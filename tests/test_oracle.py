@@ -53,12 +53,9 @@ def test_unknown_env_has_no_oracle():
         oracle_for("PickCube-v1")
 
 
-@pytest.mark.parametrize(
-    "domain, asset_source, seed",
-    [("moon", "dataset", 11), ("orbit", "dataset", 12), ("mars", "dataset", 13), ("earth", "dataset", 14), ("moon", "procedural", 2), ("mars", "procedural", 101), ("orbit", "procedural", 3), ("earth", "procedural", 4),
-     # a hole tilted 20 deg: the push stalled with a finger on the surface round it before the oracle checked for it
-     ("earth", "procedural", 50015)],
-)
+@pytest.mark.parametrize("seed", [2000, 2001])  # the peg_in_hole suite's first seeds
+@pytest.mark.parametrize("asset_source", ["procedural", "dataset"])
+@pytest.mark.parametrize("domain", ["moon", "mars", "orbit", "earth"])
 def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
     env = gym.make("PegInHoleAssembly-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
     result = run_episode(env, oracle_for("PegInHoleAssembly-v1"), seed)

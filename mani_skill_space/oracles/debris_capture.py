@@ -180,14 +180,17 @@ class DebrisCaptureOracle(Oracle):
 
     def _clear_of_debris(self, env, path: np.ndarray, meeting: np.ndarray, meeting_time: float) -> bool:
         """Whether the arm, moving along ``path`` and then waiting at its end, stays out of the ball the debris
-        sweeps (tumbling, it may point any way) until it comes within reach of the fingers at ``meeting``."""
+        sweeps (tumbling, it may point any way) until it comes within reach of the fingers at ``meeting``, once
+        the hand is there (a slow debris may be near the meeting point long before it arrives: the arm must not swing
+        through it on its way)."""
         position, velocity = self._debris_state(env)
         gravity = np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)
         radius = self._debris_radius(env)
         planner = self.solver.planner
+        arrival = len(path) * env.control_timestep
         for t in np.arange(0.0, meeting_time, SWEEP_TIME_STEP):
             centre = position + velocity * t + 0.5 * gravity * t * t
-            if np.linalg.norm(centre - meeting) < radius + HAND_LENGTH:
+            if t >= arrival and np.linalg.norm(centre - meeting) < radius + HAND_LENGTH:
                 break
             qpos = path[min(int(t / env.control_timestep), len(path) - 1)]
             planner.update_point_cloud(np.concatenate([self.solver.all_collision_pts, centre + radius * UNIT_BALL]))
