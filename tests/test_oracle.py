@@ -63,7 +63,12 @@ def test_oracle_solves_peg_in_hole(domain, asset_source, seed):
     env.close()
 
 
-@pytest.mark.parametrize("domain, asset_source, seed", [("orbit", "dataset", 10), ("orbit", "procedural", 12), ("asteroid", "procedural", 11), ("asteroid", "dataset", 13)])
+@pytest.mark.parametrize(
+    "domain, asset_source, seed",
+    # seeds of the debris_capture suite (3000..); the dataset ones give a 1U and a 3U CubeSat (seed % 3 picks the object)
+    [("orbit", "procedural", 3000), ("orbit", "procedural", 3002), ("orbit", "dataset", 3000), ("orbit", "dataset", 3001),
+     ("asteroid", "procedural", 3000), ("asteroid", "procedural", 3002), ("asteroid", "dataset", 3003), ("asteroid", "dataset", 3004)],
+)
 def test_oracle_captures_debris(domain, asset_source, seed):
     env = gym.make("DebrisCapture-v1", domain=domain, asset_source=asset_source, control_mode="pd_joint_pos", render_backend="none")
     result = run_episode(env, oracle_for("DebrisCapture-v1"), seed)

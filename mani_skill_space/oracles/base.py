@@ -213,6 +213,16 @@ class Oracle(Policy):
             path = self._timed_path(start, goal)
         yield from self._follow(path)
 
+    def straight_move_duration(self, start: np.ndarray, goal: np.ndarray) -> float:
+        """Seconds the straight joint-space move from ``start`` to ``goal`` takes at the least: its slowest joint
+        speeding up at the planner's acceleration limit to its velocity limit and slowing down again (a lower bound
+        on what ``_timed_path`` gives, at a fraction of its cost)."""
+        distance = np.abs(np.asarray(goal) - np.asarray(start))
+        velocity, acceleration = self.solver.planner.joint_vel_limits[: len(distance)], self.solver.planner.joint_acc_limits[: len(distance)]
+        cruising = distance > velocity**2 / acceleration
+        seconds = np.where(cruising, distance / velocity + velocity / acceleration, 2.0 * np.sqrt(distance / acceleration))
+        return float(seconds.max())
+
     def _timed_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         if np.abs(goal - start).max() < 1e-4:  # already there (the parameterisation needs a path to follow)
             return goal[None]

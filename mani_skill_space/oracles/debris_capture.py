@@ -10,6 +10,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 import torch
+from mplib.pymp.collision_detection import fcl
 
 from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT, tumbling_rotations
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
@@ -52,16 +53,8 @@ BRAKE_STEPS = 12
 HOLD_STEPS = 60
 
 
-def _unit_ball(spacing: float) -> np.ndarray:
-    """Points filling the unit ball on a grid (and its surface), so that no arm link fits between them."""
-    axis = np.arange(-1.0, 1.0 + 1e-9, spacing)
-    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-    inside = grid[np.linalg.norm(grid, axis=1) <= 1.0]
-    sphere = np.random.default_rng(0).normal(size=(200, 3))
-    return np.concatenate([inside, sphere / np.linalg.norm(sphere, axis=1, keepdims=True)])
-
-
-UNIT_BALL = _unit_ball(0.25)
+DEBRIS_BALL = "debris_ball"
+"""The planner's collision object standing for the ball the tumbling debris sweeps (``_clear_of_debris``)."""
 
 
 class DebrisCaptureOracle(Oracle):
@@ -140,7 +133,6 @@ class DebrisCaptureOracle(Oracle):
             found = self._search_meeting(env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only, along_the_fingers)
             if found is not None:
                 return found
-        self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
         raise PlanningFailed("the debris never passes where the hand can meet it in time")
 
     def _search_meeting(self, env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only: bool, along_the_fingers: bool):
@@ -160,14 +152,17 @@ class DebrisCaptureOracle(Oracle):
                     continue
                 for pose in self.closings_nearest_first(facing):
                     for arm in self.ik_solutions(pose):
+                        # neither the time-optimal parameterisation nor pacing makes a move shorter than its
+                        # fastest joint can make it: too slow at that, it needs neither to be ruled out
+                        if self.straight_move_duration(start, arm) + ARRIVAL_MARGIN > t:
+                            continue
                         path = self._timed_path(start, arm)
-                        if not self._arrives_in_time(path, t):  # pacing would not make it shorter
+                        if not self._arrives_in_time(path, t):
                             continue
                         path = self.paced(path)
                         if not self._arrives_in_time(path, t) or not self.path_is_free(start, arm):
                             continue
                         if self._clear_of_debris(env, path, point, t):
-                            self.solver.planner.update_point_cloud(self.solver.all_collision_pts)
                             self._tilt = tilt
                             return pose, arm
         return None
@@ -188,21 +183,32 @@ class DebrisCaptureOracle(Oracle):
         radius = self._debris_radius(env)
         planner = self.solver.planner
         arrival = len(path) * env.control_timestep
-        for t in np.arange(0.0, meeting_time, SWEEP_TIME_STEP):
-            centre = position + velocity * t + 0.5 * gravity * t * t
-            if t >= arrival and np.linalg.norm(centre - meeting) < radius + HAND_LENGTH:
-                break
-            qpos = path[min(int(t / env.control_timestep), len(path) - 1)]
-            planner.update_point_cloud(np.concatenate([self.solver.all_collision_pts, centre + radius * UNIT_BALL]))
-            if planner.check_for_env_collision(planner.robot, planner.pad_qpos(qpos), with_point_cloud=True):
-                return False
-        return True
+        world = planner.planning_world
+        ball = fcl.CollisionObject(fcl.Sphere(radius))
+        try:
+            # latest first: the arm is likeliest to meet the debris near where they are to meet, and a blocked
+            # candidate is ruled out sooner
+            for t in np.arange(0.0, meeting_time, SWEEP_TIME_STEP)[::-1]:
+                centre = position + velocity * t + 0.5 * gravity * t * t
+                if t >= arrival and np.linalg.norm(centre - meeting) < radius + HAND_LENGTH:
+                    continue  # the hand is there, waiting for it
+                qpos = path[min(int(t / env.control_timestep), len(path) - 1)]
+                ball.set_transformation(np.concatenate([centre, [1.0, 0.0, 0.0, 0.0]]))
+                world.set_normal_object(DEBRIS_BALL, ball)
+                if planner.check_for_env_collision(planner.robot, planner.pad_qpos(qpos), with_point_cloud=False):
+                    return False
+            return True
+        finally:  # the debris' ball is only for this check (the mount and ground are checked by path_is_free)
+            if DEBRIS_BALL in world.get_normal_object_names():
+                world.remove_normal_object(DEBRIS_BALL)
 
-    @staticmethod
-    def _debris_radius(env) -> float:
-        from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
+    def _debris_radius(self, env) -> float:
+        """Half the diagonal of the debris' bounding box (it is the same all episode)."""
+        if getattr(self, "_radius_of", None) is not env.debris:
+            from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
 
-        return float(np.linalg.norm(get_actor_obb(env.debris).primitive.extents)) / 2
+            self._radius_of, self._radius = env.debris, float(np.linalg.norm(get_actor_obb(env.debris).primitive.extents)) / 2
+        return self._radius
 
     def _wait_for_debris(self, env) -> Iterator[np.ndarray]:
         """Hold the open hand still until the debris is close."""
