@@ -95,7 +95,7 @@ def test_fast_motions_are_slowed_to_the_speed_limit_and_slow_ones_kept(ee_env):
         ("SampleCollection-v1", "mars", "procedural", 6000),
         ("PegInHoleAssembly-v1", "moon", "dataset", 6000),
         ("PegInHoleAssembly-v1", "moon", "procedural", 6001),
-        ("DebrisCapture-v1", "orbit", "dataset", 6000),
+        ("DebrisCapture-v1", "orbit", "dataset", 6002),
         ("DebrisCapture-v1", "orbit", "procedural", 6000),
     ],
 )
