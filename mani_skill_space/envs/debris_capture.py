@@ -71,7 +71,8 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
       enough to come back to its starting height where the arm reaches (a low arc, peaking halfway)
 
     **Success Conditions:**
-    - the debris is grasped and has moved slower than 0.05 m/s and turned slower than 0.1 rad/s for 0.5 s
+    - the debris is grasped and has moved slower than 0.05 m/s and turned slower than 0.1 rad/s for 0.5 s (its
+      velocities measured from its poses over the last two control steps)
 
     **Fail Conditions:**
     - the debris is more than 1.5 m from the arm's base and moving away (it will not come back)
@@ -130,6 +131,8 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         self._last_debris_pose = torch.zeros((self.num_envs, 7), device=self.device)
         self._debris_velocity = torch.zeros((self.num_envs, 3), device=self.device)
         self._debris_spin_velocity = torch.zeros((self.num_envs, 3), device=self.device)
+        self._step_velocity = torch.zeros((self.num_envs, 3), device=self.device)
+        self._step_spin_velocity = torch.zeros((self.num_envs, 3), device=self.device)
         self.start_checks = dict(
             draws=torch.zeros(self.num_envs, dtype=torch.int32, device=self.device),
             seconds_within_reach=torch.zeros(self.num_envs, device=self.device),
@@ -158,6 +161,8 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
             self._last_debris_pose[env_idx] = pose.raw_pose
             self._debris_velocity[env_idx] = velocity
             self._debris_spin_velocity[env_idx] = spin
+            self._step_velocity[env_idx] = velocity
+            self._step_spin_velocity[env_idx] = spin
 
     def _candidate_starts(self, rng, b: int) -> tuple[torch.Tensor, ...]:
         """``CANDIDATE_STARTS`` starts per env (b, K, ...): position, wxyz orientation, drift (with the lob under
@@ -191,12 +196,17 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         return lob
 
     def _update_task_state(self):
-        """Once per control step: the debris' velocities, measured from how far it moved and turned during the
-        step (PhysX's own velocities of a body squeezed between the fingers carry the contact solver's bias:
-        a debris held still can report a spin of several rad/s), and how long it has been held calm."""
+        """Once per control step: the debris' velocities, measured from how far it moved and turned over the last
+        two control steps, and how long it has been held calm. From poses, because PhysX's own velocities of a
+        body squeezed between the fingers carry the contact solver's bias (a debris held still can report a spin
+        of several rad/s); over two steps, because such a body also rocks back and forth from one step to the
+        next (by about 0.15 degrees: 0.1 rad/s from one step's turn, none over two)."""
         pose = self.debris.pose
         last = self._last_debris_pose
-        self._debris_velocity, self._debris_spin_velocity = step_velocities(last[:, :3], last[:, 3:], pose.p, pose.q, 1.0 / self.control_freq)
+        velocity, spin = step_velocities(last[:, :3], last[:, 3:], pose.p, pose.q, 1.0 / self.control_freq)
+        self._debris_velocity = (velocity + self._step_velocity) / 2
+        self._debris_spin_velocity = (spin + self._step_spin_velocity) / 2
+        self._step_velocity, self._step_spin_velocity = velocity, spin
         self._last_debris_pose = pose.raw_pose.clone()
         self._grasped = self.is_grasping(self.debris)  # (a contact query: once per step, evaluate reuses it)
         calm = self._grasped & (self._debris_speed() < CALM_SPEED) & (self._debris_spin() < CALM_SPIN)
@@ -210,6 +220,8 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
             last_debris_pose=self._last_debris_pose.clone(),
             debris_velocity=self._debris_velocity.clone(),
             debris_spin_velocity=self._debris_spin_velocity.clone(),
+            step_velocity=self._step_velocity.clone(),
+            step_spin_velocity=self._step_spin_velocity.clone(),
             calm_steps=self._calm_steps[:, None].float(),
         )
         return state
@@ -224,6 +236,8 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
         self._last_debris_pose[rows] = task["last_debris_pose"]
         self._debris_velocity[rows] = task["debris_velocity"]
         self._debris_spin_velocity[rows] = task["debris_spin_velocity"]
+        self._step_velocity[rows] = task.get("step_velocity", task["debris_velocity"])
+        self._step_spin_velocity[rows] = task.get("step_spin_velocity", task["debris_spin_velocity"])
         self._calm_steps[rows] = task["calm_steps"][:, 0].round().int()
 
     def _debris_speed(self) -> torch.Tensor:
