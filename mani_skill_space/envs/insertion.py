@@ -65,6 +65,7 @@ such as a triangle lying on a face, is met by the fingers at its bottom edges on
 the grip once it is off the ground (on seeds 60000-60059 in every domain the oracle inserted 73% of the 44 pegs
 lying so, 91% of the others)."""
 SIDE_TOLERANCE = 0.001
+"""m: the peg's points within this of its farthest point across the fingers are where a finger meets it."""
 LYING_AXIS = np.array([0.0, 0.0, 1.0])
 """A peg lies on a side, never on an end: its axis (z) is never the resting direction."""
 

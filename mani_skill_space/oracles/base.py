@@ -342,6 +342,10 @@ class Oracle(Policy):
                 return
         raise PlanningFailed(f"no motion to the {what} pose")
 
+    def retreat_up(self, distances: tuple[float, ...]) -> Iterator[np.ndarray]:
+        """Straight up from where the hand is, as far of ``distances`` (longest first) as the arm can go."""
+        yield from self.first_reachable([raised(self.tcp_pose(), d) for d in distances], "retreat")
+
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
         PlanningFailed if it has not within ``most_steps``."""

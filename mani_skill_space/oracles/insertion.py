@@ -22,6 +22,7 @@ from typing import Any, Callable, Generator, Iterator, Optional
 import numpy as np
 import sapien
 
+from mani_skill_space.envs.insertion import SIDE_TOLERANCE
 from mani_skill_space.oracles.base import (
     GRIPPER_CLOSED,
     POINT_SPACING,
@@ -42,12 +43,10 @@ PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
 FINGER_MARGIN = 0.006
-SIDE_TOLERANCE = 0.001
-"""m: the peg's points within this of its farthest point across the fingers are where a finger meets it."""
 PAD_HALF_WIDTH = 0.01
+"""Half the width of a Panda finger pad (m) beside the peg it grips."""
 PAD_EDGE_MARGIN = 0.002
 """m: ``_pads_square_on_sides``: the peg's outermost edge must cross a pad's face at least this far inside its edges."""
-"""Half the width of a Panda finger pad (m) beside the peg it grips."""
 FINGER_PRESS_DEPTH = 0.001
 """The hand aims its open fingers at most this far (m) below the surface the peg lies on, so that they press on
 it lightly: aimed at a flat peg's axis, a tilted or rolled hand would drive a finger a centimetre into the
@@ -342,8 +341,7 @@ class PegInserter:
                     for pose in (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)):
                         candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad), extra_reach == 0.0))
         firm = [(pose, near) for pose, overlap, near in candidates if overlap >= FIRM_PAD_OVERLAP]
-        square = [(pose, near) for pose, near in firm if self._pads_square_on_sides(pose, peg_points)]
-        firm = square + [candidate for candidate in firm if not any(candidate[0] is pose for pose, _ in square)]
+        firm.sort(key=lambda candidate: not self._pads_square_on_sides(candidate[0], peg_points))  # stable: square first
         weak = [(pose, near) for pose, overlap, near in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
         for pose, _ in firm + weak:
             yield pose, True

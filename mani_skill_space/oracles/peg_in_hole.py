@@ -10,7 +10,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mani_skill_space.oracles.base import Oracle, PlanningFailed, raised, surface_points
+from mani_skill_space.oracles.base import Oracle, PlanningFailed, surface_points
 from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES, STILL_IN_FRACTION
@@ -66,7 +66,7 @@ class MultiPegInHoleOracle(Oracle):
             self.make_solver(env, obstacles=self._obstacles(env, modules, hole, standing))
             yield from PegInserter(self, MULTI_PEG_INSERTION, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
             yield from self.open_gently(8)
-            yield from self.first_reachable([raised(self.tcp_pose(), d) for d in RETREAT_DISTANCES], "retreat")
+            yield from self.retreat_up(RETREAT_DISTANCES)
             if float(env.evaluate()["pair_inserted_fraction"][0, hole, hole]) < STILL_IN_FRACTION:
                 raise PlanningFailed(f"peg {hole} did not stay in its hole")
         yield from self.wait_for_success(20)

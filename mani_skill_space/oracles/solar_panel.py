@@ -20,11 +20,11 @@ from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, 
 INSERTION_ORDER = (2, 3, 0, 1)
 """Sockets in the order they are filled: the farther (short) ones first."""
 RETREAT_DISTANCE = 0.2
-RETREAT_DISTANCES = (RETREAT_DISTANCE, 0.12, 0.06)
-"""Where the arm cannot go the whole way up, it retreats as far as it can of these."""
 """After letting go of a peg (or the panel) the hand goes straight up this far (backing out along a tilted
 approach would drag a long peg over), well clear of the pegs' tops before it moves sideways: the planner's
 point-cloud checks miss the open fingers brushing a thin peg's top."""
+RETREAT_DISTANCES = (RETREAT_DISTANCE, 0.12, 0.06)
+"""Where the arm cannot go the whole way up, it retreats as far as it can of these."""
 PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
@@ -72,7 +72,7 @@ class SolarPanelOracle(Oracle):
             self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket))
             yield from inserter.insert(target)
             yield from self.open_gently(8)
-            yield from self.first_reachable([raised(self.tcp_pose(), d) for d in RETREAT_DISTANCES], "retreat")
+            yield from self.retreat_up(RETREAT_DISTANCES)
             # let go, a peg may lean in its socket's clearance (or, in orbit, drift to a lean): the panel's
             # funnels right it; only a peg that has come out is a failure
             if float(env.evaluate()["pair_inserted_fraction"][0, socket, socket]) < STILL_IN_FRACTION:
@@ -111,7 +111,7 @@ class SolarPanelOracle(Oracle):
         height = lambda step: max(-PLACE_PRESS, PLACE_GAP - (step + 1) * PLACE_STEP)  # noqa: E731
         yield from self.servo(lambda step: self._tcp_for_seat(env, height(step)), steps + SETTLE_STEPS, "lower the panel")
         yield from self.open_gently(8)
-        yield from self.first_reachable([raised(self.tcp_pose(), d) for d in RETREAT_DISTANCES], "retreat")
+        yield from self.retreat_up(RETREAT_DISTANCES)
 
     def _lift_panel(self) -> Iterator[np.ndarray]:
         """Straight up, as high as a screw motion goes (PANEL_LIFTS); failing all, by servoing the hand up the
