@@ -22,6 +22,7 @@ worker starts; a bad one is one line on stderr and exit status 2 (``--debug`` sh
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from dataclasses import dataclass, replace
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import Annotated, Optional, Sequence
 
 import gymnasium as gym
+import numpy as np
 import tyro
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
@@ -80,6 +82,12 @@ class Args:
     env_kwargs: str = "{}"
     """JSON object of env kwargs, e.g. '{"domain": "moon", "asset_source": "dataset"}'."""
     seed_start: int = 0
+    action_noise: float = 0.0
+    """DART-style demonstrations (Laskey et al. 2017), ``pd_ee_delta_pose`` only: Gaussian noise of this standard
+    deviation (normalised action units; 0.03 moves the TCP about 3 mm) is added to the arm's part of every action
+    the env executes, while the file records the oracle's own action. The oracle, closed loop, then labels how to
+    come back from states a little off its path, the states an imitation learner's own errors lead to. The file's
+    env states are the executed ones (replay them with ``--use-env-states``, not by their actions)."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +115,8 @@ def generate(args: Args, proc_id: int = 0) -> Outcome:
         viewer_camera_configs=dict(shader_pack=args.shader),
         **kwargs,
     )
+    if args.action_noise > 0:
+        env = ArmActionNoise(env, args.action_noise)
     name = args.traj_name if args.num_procs == 1 else f"{args.traj_name}.{proc_id}"
     env = RecordEpisode(
         env,
@@ -139,6 +149,25 @@ def generate(args: Args, proc_id: int = 0) -> Outcome:
     return Outcome(path, attempts, successes, saved)
 
 
+class ArmActionNoise(gym.Wrapper):
+    """Adds Gaussian noise of ``std`` to the arm's dimensions (all but the gripper's last) of every action, clipped to
+    the action space; the noise is drawn from the episode's seed, so a demonstration is reproducible."""
+
+    def __init__(self, env: gym.Env, std: float):
+        super().__init__(env)
+        self.std = std
+        self.rng = np.random.default_rng()
+
+    def reset(self, *, seed=None, options=None):
+        self.rng = np.random.default_rng(seed)
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        action = np.array(action, dtype=np.float32, copy=True)
+        action[..., :-1] += self.std * self.rng.standard_normal(action[..., :-1].shape)
+        return super().step(np.clip(action, self.action_space.low, self.action_space.high))
+
+
 def check_args(args: Args) -> None:
     """A ``ValueError`` naming the first bad input: an env id without an oracle, ``--env-kwargs`` that is not a
     JSON object or that the env rejects (names and values), a count below 1."""
@@ -149,6 +178,10 @@ def check_args(args: Args) -> None:
     check_at_least("--num-traj", args.num_traj, 1)
     check_at_least("--num-procs", args.num_procs, 1)
     check_at_least("--seed-start", args.seed_start, 0)
+    if not (math.isfinite(args.action_noise) and 0.0 <= args.action_noise <= 1.0):
+        raise ValueError(f"--action-noise must be in [0, 1] (normalised action units), got {args.action_noise}")
+    if args.action_noise > 0 and args.control_mode != "pd_ee_delta_pose":
+        raise ValueError(f"--action-noise needs --control-mode pd_ee_delta_pose (the oracle then corrects the noise at the next step), not {args.control_mode!r}")
     kwargs = parse_json_object(args.env_kwargs, "--env-kwargs")
     for key in kwargs:
         if key in SET_BY_THE_GENERATOR:

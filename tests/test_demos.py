@@ -91,3 +91,29 @@ def test_demos_are_recorded_natively_in_ee_delta_pose_and_replay_to_success(tmp_
         *_, info = env.step(action)
     assert bool(info["success"])  # the actions alone reproduce the demonstration
     env.close()
+
+
+def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path):
+    def record(noise):
+        args = demos.Args(env_id="SampleCollection-v1", control_mode="pd_ee_delta_pose", num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name=f"noise{noise}", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=21, action_noise=noise)
+        with h5py.File(demos.main(args).path) as trajectories:
+            return trajectories["traj_0"]["actions"][:], trajectories["traj_0"]["env_states"]["articulations"]["panda"][:]
+
+    clean_actions, clean_states = record(0.0)
+    noisy_actions, noisy_states = record(0.05)
+    again_actions, again_states = record(0.05)
+    np.testing.assert_array_equal(noisy_actions, again_actions)  # the noise is drawn from the episode's seed
+    np.testing.assert_array_equal(noisy_states, again_states)
+    steps = min(len(clean_states), len(noisy_states))
+    assert np.abs(noisy_states[:steps] - clean_states[:steps]).max() > 1e-3  # the executed motion was perturbed
+    # the recorded actions are the oracle's corrections, not the executed (noisy) ones: replaying them does not
+    # retrace the recorded states, as replaying a clean demonstration does
+    assert np.abs(noisy_actions).max() <= 1.0
+    steps = min(len(clean_actions), len(noisy_actions))
+    assert not np.allclose(noisy_actions[:steps], clean_actions[:steps])
+    env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", render_backend="none")
+    env.reset(seed=21)
+    for action in noisy_actions[:30]:
+        env.step(action)
+    assert np.abs(env.unwrapped.get_state_dict()["articulations"]["panda"][0].numpy() - noisy_states[30]).max() > 1e-4
+    env.close()
