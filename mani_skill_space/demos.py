@@ -22,7 +22,6 @@ worker starts; a bad one is one line on stderr and exit status 2 (``--debug`` sh
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from dataclasses import dataclass, replace
@@ -39,7 +38,9 @@ from tqdm import tqdm
 
 from mani_skill_space.cli_support import check_at_least, checking_inputs, parse_json_object, run_cli, tyro_parser
 from mani_skill_space.envs import task_class
+from mani_skill_space.kwarg_checks import checked_number
 from mani_skill_space.oracles import ORACLE_CONTROL_MODES, ORACLES, oracle_for
+from mani_skill_space.oracles.end_effector import CONTROL_MODE as EE_CONTROL_MODE
 from mani_skill_space.rollout import run_episode
 from mani_skill_space.suites import check_env_kwargs
 
@@ -178,10 +179,9 @@ def check_args(args: Args) -> None:
     check_at_least("--num-traj", args.num_traj, 1)
     check_at_least("--num-procs", args.num_procs, 1)
     check_at_least("--seed-start", args.seed_start, 0)
-    if not (math.isfinite(args.action_noise) and 0.0 <= args.action_noise <= 1.0):
-        raise ValueError(f"--action-noise must be in [0, 1] (normalised action units), got {args.action_noise}")
-    if args.action_noise > 0 and args.control_mode != "pd_ee_delta_pose":
-        raise ValueError(f"--action-noise needs --control-mode pd_ee_delta_pose (the oracle then corrects the noise at the next step), not {args.control_mode!r}")
+    checked_number("--action-noise", args.action_noise, 0.0, 1.0, meaning="normalised action units")
+    if args.action_noise > 0 and args.control_mode != EE_CONTROL_MODE:
+        raise ValueError(f"--action-noise needs --control-mode {EE_CONTROL_MODE} (the oracle then corrects the noise at the next step), not {args.control_mode!r}")
     kwargs = parse_json_object(args.env_kwargs, "--env-kwargs")
     for key in kwargs:
         if key in SET_BY_THE_GENERATOR:

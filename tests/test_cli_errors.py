@@ -57,7 +57,7 @@ CASES = [
     ("demos", lambda t: ["-e", "DebrisCapture-v1", "--env-kwargs", '{"difficulty": 100}'], "difficulty must be a finite number >= 0 and <= 2"),
     ("demos", lambda t: ["--env-kwargs", '{"control_mode": "pd_ee_delta_pose"}'], "--env-kwargs cannot set 'control_mode'"),
     ("demos", lambda t: ["-c", "pd_ee_pose"], "unknown --control-mode 'pd_ee_pose'; valid choices: pd_joint_pos, pd_ee_delta_pose"),
-    ("demos", lambda t: ["-c", "pd_ee_delta_pose", "--action-noise", "nan"], "--action-noise must be in [0, 1] (normalised action units), got nan"),
+    ("demos", lambda t: ["-c", "pd_ee_delta_pose", "--action-noise", "nan"], "--action-noise must be a finite number >= 0 and <= 1 (normalised action units), got nan"),
     ("demos", lambda t: ["--action-noise", "0.02"], "--action-noise needs --control-mode pd_ee_delta_pose"),
     ("replay", lambda t: ["--traj-path", str(t / "missing.h5")], "no trajectory file"),
     ("replay", lambda t: ["--traj-path", _trajectory(t, "NoSuchTask-v1", {})], "'NoSuchTask-v1', which neither mani-skill-space nor ManiSkill registers"),

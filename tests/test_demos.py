@@ -104,13 +104,13 @@ def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path
     again_actions, again_states = record(0.05)
     np.testing.assert_array_equal(noisy_actions, again_actions)  # the noise is drawn from the episode's seed
     np.testing.assert_array_equal(noisy_states, again_states)
-    steps = min(len(clean_states), len(noisy_states))
-    assert np.abs(noisy_states[:steps] - clean_states[:steps]).max() > 1e-3  # the executed motion was perturbed
+    both_states = min(len(clean_states), len(noisy_states))
+    assert np.abs(noisy_states[:both_states] - clean_states[:both_states]).max() > 1e-3  # the executed motion was perturbed
     # the recorded actions are the oracle's corrections, not the executed (noisy) ones: replaying them does not
     # retrace the recorded states, as replaying a clean demonstration does
     assert np.abs(noisy_actions).max() <= 1.0
-    steps = min(len(clean_actions), len(noisy_actions))
-    assert not np.allclose(noisy_actions[:steps], clean_actions[:steps])
+    both_actions = min(len(clean_actions), len(noisy_actions))
+    assert not np.allclose(noisy_actions[:both_actions], clean_actions[:both_actions])
     env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", render_backend="none")
     env.reset(seed=21)
     for action in noisy_actions[:30]:
