@@ -62,7 +62,7 @@ class DebrisCaptureOracle(Oracle):
         self.make_solver(env)
         meeting, arm = self._meeting_point(env)
         yield from self.joint_move(arm, "meeting")
-        yield from self._wait_for_debris(env)
+        yield from self._wait_for_debris(env, meeting)
         self._grip_orientation = meeting.q
         yield from self._follow_debris(env, meeting)
         yield from self._brake(env)
@@ -210,13 +210,19 @@ class DebrisCaptureOracle(Oracle):
             self._radius_of, self._radius = env.debris, float(np.linalg.norm(get_actor_obb(env.debris).primitive.extents)) / 2
         return self._radius
 
-    def _wait_for_debris(self, env) -> Iterator[np.ndarray]:
-        """Hold the open hand still until the debris is close."""
+    def _wait_for_debris(self, env, meeting: sapien.Pose) -> Iterator[np.ndarray]:
+        """Hold the open hand still at the meeting pose until the debris is close. On a free-flying servicer the
+        swing there has moved and turned the bus (a few centimetres and degrees, enough to put the hand beside the
+        debris' path), so the hand is servoed back onto the meeting pose, planned from where the bus is now."""
+        free_flyer = getattr(env, "free_flyer", False)
         for _ in range(int(LATEST_MEETING / env.control_timestep)):
             position, _ = self._debris_state(env)
             if np.linalg.norm(position - self._tcp_position()) < FOLLOW_DISTANCE or self._touching(env):
                 return
-            yield self.hold_action()
+            if free_flyer:
+                yield from self.servo(lambda _: meeting, 1, "meeting")
+            else:
+                yield self.hold_action()
         raise PlanningFailed("the debris did not arrive")
 
     @staticmethod
