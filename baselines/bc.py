@@ -15,7 +15,6 @@ the evaluation CLI scores with ``--policy checkpoint:runs/<name>/best.pt``.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +32,7 @@ from mani_skill_space.learning import (
     LearningCurve,
     load_demonstrations,
     save_checkpoint,
+    set_learning_rate,
     task_of_demonstrations,
 )
 from mani_skill_space.rollout import evaluate_policy
@@ -122,14 +122,6 @@ def action_loss_weights(actions: torch.Tensor) -> torch.Tensor:
     scaled to average 1 so that the loss keeps the magnitude ``--lr`` was tuned for."""
     weights = 1.0 / actions.var(0).clamp_min(1e-4)
     return weights / weights.mean()
-
-
-def set_learning_rate(optimiser: torch.optim.Optimizer, args: Args, iteration: int, minutes: float) -> None:
-    if args.lr_schedule == "constant":
-        return
-    progress = min(1.0, max(iteration / args.max_iterations, minutes / args.minutes))
-    for group in optimiser.param_groups:
-        group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
 if __name__ == "__main__":

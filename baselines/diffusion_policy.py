@@ -14,12 +14,13 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import numpy as np
 import torch
 import tyro
 from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
+from diffusers.training_utils import EMAModel
 from tqdm import tqdm
 
 from mani_skill_space.learning import (
@@ -29,6 +30,7 @@ from mani_skill_space.learning import (
     LearningCurve,
     load_demonstrations,
     save_checkpoint,
+    set_learning_rate,
     task_of_demonstrations,
 )
 from mani_skill_space.rollout import evaluate_policy
@@ -49,6 +51,15 @@ class Args:
     max_iterations: int = 100_000
     batch_size: int = 256
     lr: float = 1e-4
+    lr_schedule: Literal["constant", "cosine"] = "constant"
+    """``cosine`` decays the learning rate to zero over the budget (``--minutes`` or ``--max-iterations``, whichever
+    ends first), as ManiSkill's diffusion policy does over its iterations."""
+    ema: bool = False
+    """Evaluate and save an exponential moving average of the weights (diffusers' ``EMAModel``, as ManiSkill's
+    diffusion policy: its decay grows as (1 + k) / (10 + k) with the update k, to at most 0.9999)."""
+    obs_noise: float = 0.0
+    """Gaussian noise (in units of each observation's standard deviation) added to the observations the chunks
+    are conditioned on in training, as ``bc.py``'s ``--obs-noise``."""
     hidden: int = 512
     eval_every: int = 5000
     eval_episodes: int = 10
@@ -92,6 +103,7 @@ def main(args: Args) -> Path:
     scheduler_config = dict(num_train_timesteps=args.diffusion_steps, beta_schedule="squaredcos_cap_v2", clip_sample=True, prediction_type="epsilon")
     scheduler = DDPMScheduler(**scheduler_config)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-6)
+    ema = EMAModel(parameters=model.parameters(), power=0.75) if args.ema else None
     run_dir = args.output_dir / (args.name or f"diffusion-{env_id}-{int(time.time())}")
     curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
     diffusion = dict(
@@ -99,7 +111,15 @@ def main(args: Args) -> Path:
     )
     checkpoint = run_dir / "checkpoint.pt"
     best = BestCheckpoint(checkpoint)
-    save = lambda: save_checkpoint(checkpoint, "diffusion", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode, diffusion=diffusion)  # noqa: E731
+
+    def save():
+        if ema is not None:  # the averaged weights, the training ones put back after
+            ema.store(model.parameters())
+            ema.copy_to(model.parameters())
+        save_checkpoint(checkpoint, "diffusion", model, model_kwargs, env_id, env_kwargs, obs_mode, control_mode, diffusion=diffusion)
+        if ema is not None:
+            ema.restore(model.parameters())
+
     print(f"{len(episodes)} demonstrations, {len(index)} samples of {env_id} {env_kwargs}; training in {run_dir}")
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     start = time.time()
@@ -107,13 +127,18 @@ def main(args: Args) -> Path:
     for iteration in progress:
         model.train()
         obs, actions = gather(episodes, index[rng.integers(0, len(index), args.batch_size)], args.obs_horizon, args.action_horizon)
+        if args.obs_noise:
+            obs = obs + args.obs_noise * model.obs_std * torch.randn_like(obs)
         noise = torch.randn_like(actions)
         steps = torch.randint(0, scheduler.config.num_train_timesteps, (len(actions),))
         noisy = scheduler.add_noise(actions, noise, steps)
         loss = torch.nn.functional.mse_loss(model(noisy, steps, obs), noise)
+        set_learning_rate(optimiser, args, iteration, (time.time() - start) / 60)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
+        if ema is not None:
+            ema.step(model.parameters())
         minutes = (time.time() - start) / 60
         out_of_time = minutes >= args.minutes or iteration == args.max_iterations
         if iteration % 100 == 0:

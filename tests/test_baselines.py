@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from mani_skill_space import eval as evaluation
-from mani_skill_space.learning import BestCheckpoint, CheckpointPolicy, load_demonstrations
+from mani_skill_space.learning import BestCheckpoint, CheckpointPolicy, load_demonstrations, set_learning_rate
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_KWARGS = {"domain": "mars", "asset_source": "dataset"}
@@ -116,12 +116,29 @@ def test_bc_learning_rate_schedule_follows_the_budget_that_ends_first(schedule):
     assert rates == pytest.approx(expected, abs=1e-12)
 
 
+def test_an_unknown_learning_rate_schedule_names_the_valid_ones():
+    args = _baseline("bc").Args(demos=Path("unused.h5"), lr_schedule="linear")
+    with pytest.raises(ValueError, match="valid choices: constant, cosine"):
+        set_learning_rate(torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=args.lr), args, 0, 0.0)
+
+
 def test_diffusion_policy(demos, tmp_path):
     dp = _baseline("diffusion_policy")
     checkpoint = dp.main(dp.Args(demos=demos, max_iterations=60, eval_every=60, eval_episodes=0, batch_size=32, diffusion_steps=10, output_dir=tmp_path, name="dp"))
     _curve(tmp_path / "dp")
     assert torch.load(checkpoint, weights_only=False)["diffusion"]["inference_steps"] == 10
     _score(checkpoint, tmp_path)
+
+
+def test_diffusion_policy_saves_the_moving_average_of_its_weights_with_ema(demos, tmp_path):
+    dp = _baseline("diffusion_policy")
+    tiny = dict(demos=demos, max_iterations=30, eval_every=30, eval_episodes=0, batch_size=16, diffusion_steps=10, output_dir=tmp_path, lr_schedule="cosine", obs_noise=0.05)
+    trained = torch.load(dp.main(dp.Args(**tiny, name="plain")), weights_only=True)["state_dict"]
+    averaged = torch.load(dp.main(dp.Args(**tiny, name="ema", ema=True)), weights_only=True)["state_dict"]
+    assert trained.keys() == averaged.keys()
+    assert torch.equal(trained["obs_mean"], averaged["obs_mean"])  # buffers are not averaged
+    weights = [key for key in trained if key.startswith("net.") and key.endswith("weight")]
+    assert weights and all(not torch.allclose(trained[key], averaged[key]) for key in weights)
 
 
 @pytest.mark.parametrize("obs_mode", ["state", "rgbd"])

@@ -6,7 +6,8 @@
   evaluation CLI runs for ``--policy checkpoint:PATH``; ``BestCheckpoint`` keeps the best one seen in training;
 - ``vector_env``: vectorised training envs (GPU-batched, or CPU worker processes);
 - ``curves``: learning curves (CSV and PNG);
-- ``demonstrations``: ManiSkill trajectory files as the imitation learners read them.
+- ``demonstrations``: ManiSkill trajectory files as the imitation learners read them;
+- ``schedules``: the imitation learners' learning-rate schedules.
 
 Baselines evaluate during training with ``mani_skill_space.rollout.evaluate_policy``: the evaluation CLI's
 protocol and code.
@@ -27,6 +28,7 @@ from mani_skill_space.learning.networks import (
     mlp,
 )
 from mani_skill_space.learning.observations import IMAGE_OBS_MODES, STATE_OBS_MODES, encode_observation
+from mani_skill_space.learning.schedules import LR_SCHEDULES, set_learning_rate
 from mani_skill_space.learning.vector_env import VectorEnv
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "DiffusionNoisePredictor",
     "GaussianActorCritic",
     "IMAGE_OBS_MODES",
+    "LR_SCHEDULES",
     "LearningCurve",
     "MODELS",
     "OBS_CLIP",
@@ -52,5 +55,6 @@ __all__ = [
     "load_model",
     "mlp",
     "save_checkpoint",
+    "set_learning_rate",
     "task_of_demonstrations",
 ]
