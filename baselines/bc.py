@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Optional
 
 import numpy as np
 import torch
@@ -30,6 +30,7 @@ from mani_skill_space.learning import (
     BestCheckpoint,
     CheckpointPolicy,
     LearningCurve,
+    LrSchedule,
     load_demonstrations,
     save_checkpoint,
     set_learning_rate,
@@ -53,7 +54,7 @@ class Args:
     obs_noise: float = 0.05
     """Gaussian noise (in units of each observation's standard deviation) added to training observations, so
     that the policy has seen states a little off the demonstrations (closed-loop errors compound otherwise)."""
-    lr_schedule: Literal["constant", "cosine"] = "constant"
+    lr_schedule: LrSchedule = "constant"
     """``cosine`` decays the learning rate to zero over the training budget (``--minutes`` or
     ``--max-iterations``, whichever ends first), as ManiSkill's diffusion policy baseline does: the last
     iterations refine rather than jump, which a millimetre-precise task (the peg's 1 mm clearance) needs."""

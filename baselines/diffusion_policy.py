@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Optional
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from mani_skill_space.learning import (
     CheckpointPolicy,
     DiffusionNoisePredictor,
     LearningCurve,
+    LrSchedule,
     load_demonstrations,
     save_checkpoint,
     set_learning_rate,
@@ -51,7 +52,7 @@ class Args:
     max_iterations: int = 100_000
     batch_size: int = 256
     lr: float = 1e-4
-    lr_schedule: Literal["constant", "cosine"] = "constant"
+    lr_schedule: LrSchedule = "constant"
     """``cosine`` decays the learning rate to zero over the budget (``--minutes`` or ``--max-iterations``, whichever
     ends first), as ManiSkill's diffusion policy does over its iterations."""
     ema: bool = False

@@ -28,7 +28,7 @@ from mani_skill_space.learning.networks import (
     mlp,
 )
 from mani_skill_space.learning.observations import IMAGE_OBS_MODES, STATE_OBS_MODES, encode_observation
-from mani_skill_space.learning.schedules import LR_SCHEDULES, set_learning_rate
+from mani_skill_space.learning.schedules import LR_SCHEDULES, LrSchedule, set_learning_rate
 from mani_skill_space.learning.vector_env import VectorEnv
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "IMAGE_OBS_MODES",
     "LR_SCHEDULES",
     "LearningCurve",
+    "LrSchedule",
     "MODELS",
     "OBS_CLIP",
     "ObservationEncoder",

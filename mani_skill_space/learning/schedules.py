@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
+from typing import Literal, get_args
 
 import torch
 
-LR_SCHEDULES = ("constant", "cosine")
+LrSchedule = Literal["constant", "cosine"]
+"""The ``--lr-schedule`` choices of the imitation baselines."""
+LR_SCHEDULES: tuple[str, ...] = get_args(LrSchedule)
 
 
 def set_learning_rate(optimiser: torch.optim.Optimizer, args, iteration: int, minutes: float) -> None:
