@@ -2,11 +2,18 @@
 
     python baselines/sac.py --env-id SampleCollection-v1 --env-kwargs '{"domain": "mars", "asset_source": "dataset"}'
 
-With ``--demos``, RLPD (Ball et al., 2023, as ManiSkill's ``examples/baselines/rlpd``): SAC on the sparse reward
-with half of every batch drawn from oracle demonstrations and LayerNorm in the critics, e.g.
+With ``--demos``, RLPD (Ball et al., 2023, as ManiSkill's ``examples/baselines/rlpd``): SAC with half of every
+batch drawn from oracle demonstrations and LayerNorm in the critics, e.g. on the sparse reward
 
     python baselines/sac.py --env-id SampleCollection-v1 --env-kwargs '{"domain": "mars", "asset_source": "dataset"}' \
         --reward-mode sparse --demos demos/SampleCollection-v1/motionplanning/tubes.h5 --critic-layer-norm --gamma 0.9
+
+or on the dense reward, from demonstrations replayed to record it (their files store success, not rewards):
+
+    mani-skill-space replay --traj-path demos/SampleCollection-v1/motionplanning/tubes.h5 -o state --save-traj \
+        --record-rewards --reward-mode normalized_dense
+    python baselines/sac.py ... --demos demos/SampleCollection-v1/motionplanning/tubes.state.pd_ee_delta_pose.physx_cpu.h5 \
+        --critic-layer-norm
 
 Envs as in ``ppo.py`` (GPU-batched with CUDA, worker processes on a CPU). Writes ``runs/<name>/curve.csv``,
 ``curve.png`` and ``checkpoint.pt`` (the actor) for ``python -m mani_skill_space.eval --policy checkpoint:PATH``.
@@ -48,13 +55,14 @@ class Args:
     gamma: float = 0.8
     tau: float = 0.01
     lr: float = 3e-4
-    reward_mode: Literal["normalized_dense", "sparse"] = "normalized_dense"
+    reward_mode: Literal["normalized_dense", "dense", "sparse"] = "normalized_dense"
     """``sparse``: 1 on the steps the task is solved, else 0 (ManiSkill's sparse reward, what RLPD learns from)."""
     demos: Optional[Path] = None
     """RLPD: draw half of every batch from these demonstrations (a ManiSkill trajectory file with state
     observations, recorded on the same env, kwargs and control mode; its successful episodes), the other half
-    from the agent's own interaction. Their rewards are the file's per-step success, so this needs
-    ``--reward-mode sparse``."""
+    from the agent's own interaction. With ``--reward-mode sparse`` their rewards are the file's per-step
+    success; with a dense mode, the rewards the file records, which must be of that mode (``replay
+    --record-rewards --reward-mode MODE``)."""
     num_demos: Optional[int] = None
     """Use only the first N successful demonstrations."""
     critic_layer_norm: bool = False
@@ -87,10 +95,9 @@ def _layer_normed_mlp(sizes: list[int]) -> nn.Sequential:
 
 
 def demonstration_transitions(args: Args, env_kwargs: dict, device: torch.device) -> dict[str, torch.Tensor]:
-    """The successful episodes of ``args.demos`` as transitions with the sparse reward (the file's per-step
-    success); the file must have been recorded on the env, kwargs and control mode being trained."""
-    if args.reward_mode != "sparse":
-        raise ValueError(f"--demos needs --reward-mode sparse (the demonstrations record success, not the {args.reward_mode} reward)")
+    """The successful episodes of ``args.demos`` as transitions with the reward being trained on: the sparse reward
+    is the file's per-step success, a dense one the rewards the file recorded in that reward mode. The file must
+    have been recorded on the env, kwargs and control mode being trained."""
     episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
     recorded = task_of_demonstrations(env_info)
     wanted = (args.env_id, env_kwargs, "state", args.control_mode)
@@ -98,13 +105,24 @@ def demonstration_transitions(args: Args, env_kwargs: dict, device: torch.device
         raise ValueError(f"{args.demos} holds demonstrations of {recorded} (env id, kwargs, obs mode, control mode), not {wanted}")
     if any("success" not in e or "terminated" not in e for e in episodes):
         raise ValueError(f"{args.demos} does not record per-step success and terminated flags")
-    joined = lambda key, part=slice(None): torch.as_tensor(np.concatenate([e[key][part] for e in episodes]), dtype=torch.float32, device=device)  # noqa: E731
+    if args.reward_mode == "sparse":
+        rewards = [e["success"] for e in episodes]
+    else:
+        recorded_mode = env_info["env_kwargs"].get("reward_mode")
+        if recorded_mode != args.reward_mode or any("rewards" not in e for e in episodes):
+            raise ValueError(
+                f"--reward-mode {args.reward_mode} needs demonstrations that record that reward ({args.demos} records "
+                f"{'no rewards' if any('rewards' not in e for e in episodes) else f'the {recorded_mode} reward'}): replay them with "
+                f"`mani-skill-space replay --traj-path {args.demos} -o state --save-traj --record-rewards --reward-mode {args.reward_mode}`, or train with --reward-mode sparse"
+            )
+        rewards = [e["rewards"] for e in episodes]
+    joined = lambda arrays: torch.as_tensor(np.concatenate(arrays), dtype=torch.float32, device=device)  # noqa: E731
     return dict(
-        state=joined("obs", slice(None, -1)),
-        action=joined("actions"),
-        reward=joined("success"),
-        next_state=joined("obs", slice(1, None)),
-        terminated=joined("terminated"),
+        state=joined([e["obs"][:-1] for e in episodes]),
+        action=joined([e["actions"] for e in episodes]),
+        reward=joined(rewards),
+        next_state=joined([e["obs"][1:] for e in episodes]),
+        terminated=joined([e["terminated"] for e in episodes]),
     )
 
 

@@ -70,6 +70,9 @@ class Args:
     only_count_success: bool = False
     """Keep going until num_traj demos succeed; save only the successful ones."""
     reward_mode: Optional[str] = None
+    record_rewards: bool = False
+    """Store every step's reward (of ``--reward-mode``, which must then be given) in the file, as ManiSkill's replay
+    ``--record-rewards`` does: what RLPD on a dense reward learns from (``baselines/sac.py --demos``)."""
     sim_backend: Annotated[str, tyro.conf.arg(aliases=["-b"])] = "auto"
     render_mode: str = "rgb_array"
     vis: bool = False
@@ -127,7 +130,7 @@ def generate(args: Args, proc_id: int = 0) -> Outcome:
         source_type="motionplanning",
         source_desc="mani-skill-space motion-planning oracle (mani_skill_space.oracles)",
         video_fps=int(env.unwrapped.control_freq),
-        record_reward=False,
+        record_reward=args.record_rewards,
         save_on_reset=False,
     )
     path = env._h5_file.filename
@@ -182,6 +185,8 @@ def check_args(args: Args) -> None:
     checked_number("--action-noise", args.action_noise, 0.0, 1.0, meaning="normalised action units")
     if args.action_noise > 0 and args.control_mode != EE_CONTROL_MODE:
         raise ValueError(f"--action-noise needs --control-mode {EE_CONTROL_MODE} (the oracle then corrects the noise at the next step), not {args.control_mode!r}")
+    if args.record_rewards and args.reward_mode in (None, "none"):
+        raise ValueError("--record-rewards needs --reward-mode (e.g. normalized_dense; it names the reward the file stores)")
     kwargs = parse_json_object(args.env_kwargs, "--env-kwargs")
     for key in kwargs:
         if key in SET_BY_THE_GENERATOR:

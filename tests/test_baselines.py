@@ -4,11 +4,14 @@ scores in the evaluation CLI."""
 import csv
 import importlib.util
 import json
+import shutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 import torch
 
@@ -29,7 +32,8 @@ def _baseline(name: str):
 
 @pytest.fixture(scope="module")
 def demos(tmp_path_factory):
-    """Two oracle demonstrations of SampleCollection, converted to pd_ee_delta_pose with state observations."""
+    """Two oracle demonstrations of SampleCollection, converted to pd_ee_delta_pose with state observations and their
+    normalized dense rewards."""
     out = tmp_path_factory.mktemp("demos")
     subprocess.run(
         [sys.executable, "-m", "mani_skill_space.demos", "-e", "SampleCollection-v1", "-n", "2", "-j", "1", "--record-dir", str(out), "--traj-name", "tiny",
@@ -38,8 +42,10 @@ def demos(tmp_path_factory):
     )  # fmt: skip
     raw = out / "SampleCollection-v1" / "motionplanning" / "tiny.h5"
     subprocess.run(
-        [sys.executable, "-m", "mani_skill_space.replay", "--traj-path", str(raw), "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj"], check=True, cwd=ROOT
-    )
+        [sys.executable, "-m", "mani_skill_space.replay", "--traj-path", str(raw), "-c", "pd_ee_delta_pose", "-o", "state", "--save-traj",
+         "--record-rewards", "--reward-mode", "normalized_dense"],
+        check=True, cwd=ROOT,
+    )  # fmt: skip
     converted = sorted(raw.parent.glob("tiny.state.pd_ee_delta_pose*.h5"))
     assert converted, list(raw.parent.iterdir())
     return converted[0]
@@ -182,10 +188,29 @@ def test_rlpd_learns_from_the_sparse_reward_with_half_of_each_batch_from_the_dem
     _score(checkpoint, tmp_path)
 
 
-def test_rlpd_refuses_a_dense_reward_and_demonstrations_of_another_task(demos):
+def test_rlpd_on_the_dense_reward_takes_the_rewards_the_demonstrations_recorded(demos):
     sac = _baseline("sac")
-    with pytest.raises(ValueError, match="needs --reward-mode sparse"):
-        sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=demos), ENV_KWARGS, torch.device("cpu"))
+    args = sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=demos, reward_mode="normalized_dense")
+    transitions = sac.demonstration_transitions(args, ENV_KWARGS, torch.device("cpu"))
+    episodes, _ = load_demonstrations(demos)
+    recorded = torch.as_tensor(np.concatenate([e["rewards"] for e in episodes]))
+    assert torch.equal(transitions["reward"], recorded)
+    sparse = sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=demos, reward_mode="sparse"), ENV_KWARGS, torch.device("cpu"))
+    assert recorded.max() <= 1 and (recorded[sparse["reward"] == 0] > 0).any()  # the dense reward pays before the success
+
+
+def test_rlpd_refuses_demonstrations_without_the_reward_or_of_another_task(demos, tmp_path):
+    sac = _baseline("sac")
+    with pytest.raises(ValueError, match="--reward-mode dense needs demonstrations that record that reward .* the normalized_dense reward"):
+        sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=demos, reward_mode="dense"), ENV_KWARGS, torch.device("cpu"))
+    unrewarded = tmp_path / demos.name
+    shutil.copy(demos, unrewarded)
+    shutil.copy(demos.with_suffix(".json"), unrewarded.with_suffix(".json"))
+    with h5py.File(unrewarded, "r+") as data:
+        for trajectory in data.values():
+            del trajectory["rewards"]
+    with pytest.raises(ValueError, match="records no rewards.*--record-rewards --reward-mode normalized_dense"):
+        sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(ENV_KWARGS), demos=unrewarded), ENV_KWARGS, torch.device("cpu"))
     moon = dict(ENV_KWARGS, domain="moon")
     with pytest.raises(ValueError, match="holds demonstrations of"):
         sac.demonstration_transitions(sac.Args(env_kwargs=json.dumps(moon), demos=demos, reward_mode="sparse"), moon, torch.device("cpu"))

@@ -59,6 +59,7 @@ CASES = [
     ("demos", lambda t: ["-c", "pd_ee_pose"], "unknown --control-mode 'pd_ee_pose'; valid choices: pd_joint_pos, pd_ee_delta_pose"),
     ("demos", lambda t: ["-c", "pd_ee_delta_pose", "--action-noise", "nan"], "--action-noise must be a finite number >= 0 and <= 1 (normalised action units), got nan"),
     ("demos", lambda t: ["--action-noise", "0.02"], "--action-noise needs --control-mode pd_ee_delta_pose"),
+    ("demos", lambda t: ["--record-rewards"], "--record-rewards needs --reward-mode"),
     ("replay", lambda t: ["--traj-path", str(t / "missing.h5")], "no trajectory file"),
     ("replay", lambda t: ["--traj-path", _trajectory(t, "NoSuchTask-v1", {})], "'NoSuchTask-v1', which neither mani-skill-space nor ManiSkill registers"),
     ("replay", lambda t: ["--traj-path", _trajectory(t, "PegInHoleAssembly-v1", {"domain": "moon"}), "-c", "pd_magic"], "unknown control_mode 'pd_magic'"),

@@ -93,6 +93,20 @@ def test_demos_are_recorded_natively_in_ee_delta_pose_and_replay_to_success(tmp_
     env.close()
 
 
+def test_demos_record_the_dense_reward_the_env_computes_when_asked(tmp_path):
+    args = demos.Args(env_id="SampleCollection-v1", control_mode="pd_ee_delta_pose", num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name="rewarded", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=21, reward_mode="normalized_dense", record_rewards=True)
+    path = demos.main(args).path
+    with h5py.File(path) as trajectories:
+        actions, rewards, success = (trajectories["traj_0"][key][:] for key in ("actions", "rewards", "success"))
+    assert json.loads(open(path.replace(".h5", ".json")).read())["env_info"]["env_kwargs"]["reward_mode"] == "normalized_dense"
+    env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", reward_mode="normalized_dense", render_backend="none")
+    env.reset(seed=21)
+    replayed = [float(env.step(action)[1]) for action in actions]
+    env.close()
+    np.testing.assert_allclose(rewards, replayed, rtol=1e-6)
+    assert success[-1] and rewards[-1] == 1.0 and rewards[0] < 0.5  # the normalised reward: 1 once solved, less before
+
+
 def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path):
     def record(noise):
         args = demos.Args(env_id="SampleCollection-v1", control_mode="pd_ee_delta_pose", num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name=f"noise{noise}", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=21, action_noise=noise)

@@ -12,8 +12,9 @@ from mani_skill_space.kwarg_checks import RUN_KWARGS
 
 def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[int] = None) -> tuple[list[dict[str, np.ndarray]], dict]:
     """Episodes of a ManiSkill trajectory file (``.h5`` + ``.json``, state observations): a list of
-    ``{"obs": (T + 1, d), "actions": (T, a)}`` (with ``"success"`` and ``"terminated"``, (T,) booleans, where the
-    file records them, as ManiSkill's ``RecordEpisode`` does) and the file's env info (env id, env kwargs)."""
+    ``{"obs": (T + 1, d), "actions": (T, a)}`` (with ``"success"`` and ``"terminated"``, (T,) booleans, and
+    ``"rewards"``, (T,) floats, where the file records them, as ManiSkill's ``RecordEpisode`` does; the reward is
+    the one of the file's ``reward_mode``) and the file's env info (env id, env kwargs)."""
     import json
 
     import h5py
@@ -31,6 +32,8 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
                 raise ValueError(f"{path} has {sorted(obs.keys())} observations; convert it with obs mode 'state' (-o state)")
             episode_data = {"obs": np.asarray(obs, dtype=np.float32), "actions": np.asarray(trajectory["actions"], dtype=np.float32)}
             episode_data.update({flag: np.asarray(trajectory[flag], dtype=bool) for flag in ("success", "terminated") if flag in trajectory})
+            if "rewards" in trajectory:
+                episode_data["rewards"] = np.asarray(trajectory["rewards"], dtype=np.float32)
             episodes.append(episode_data)
             if limit is not None and len(episodes) >= limit:
                 break
