@@ -7,7 +7,7 @@ import sapien
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import _trapezoid
+from mani_skill_space.oracles.base import _finger_box_corners, _trapezoid
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
@@ -200,3 +200,23 @@ def test_pad_overlap_is_the_share_of_the_pad_the_object_covers_seen_along_the_cl
     turned = sapien.Pose([0.3, 0.1, 0.2], [0.7071068, 0.0, 0.0, 0.7071068])  # the hand and the box moved together
     moved = box @ turned.to_transformation_matrix()[:3, :3].T + turned.p
     assert pad_overlap(turned, moved, PAD, gap) == pytest.approx(overlap, abs=1e-6)
+
+
+def test_an_oracle_can_plan_with_the_fingers_open_as_they_are():
+    """mplib's Panda keeps its fingers closed: a point inside the open left finger is no obstacle to it, unless the
+    oracle plans with the fingers as they are (the multi-peg oracle does: its open hand passes standing pegs)."""
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=0)
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    oracle.reset(env, 0)
+    assert oracle.plans_with_the_fingers_as_they_are and not oracle_for("PegInHoleAssembly-v1").plans_with_the_fingers_as_they_are
+    outer_box = max(_finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
+    in_the_open_finger = (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
+    here = oracle.arm_qpos()
+    free = {}
+    for as_they_are in (False, True):
+        oracle.plans_with_the_fingers_as_they_are = as_they_are
+        oracle.make_solver(env.unwrapped, obstacles=in_the_open_finger[None])
+        free[as_they_are] = oracle.path_is_free(here, here)
+    env.close()
+    assert free == {False: True, True: False}

@@ -63,6 +63,11 @@ class Oracle(Policy):
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
     swing."""
 
+    plans_with_the_fingers_as_they_are: bool = False
+    """Where set, the planner's Panda has its fingers where the simulated ones are (open, or closed on what the hand
+    holds) when it checks a motion for collisions. mplib's model otherwise keeps them closed, i.e. an open finger's
+    outer side 4 cm farther out than planned: room enough to sweep through a thin peg standing beside the path."""
+
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
         self.gripper = GRIPPER_OPEN
@@ -151,6 +156,17 @@ class Oracle(Policy):
             yield from self._follow(positions)
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
+    def _plan_with_the_fingers_now(self) -> None:
+        """Where ``plans_with_the_fingers_as_they_are``, the planner's finger joints set to the simulated ones (the
+        arm joints of every check come from the caller; ``pad_qpos`` fills the rest from the model)."""
+        if not self.plans_with_the_fingers_as_they_are:
+            return
+        model = self.solver.planner.robot
+        qpos = model.get_qpos()
+        fingers = self.env.agent.robot.get_qpos()[0, len(self.arm_qpos()) :].cpu().numpy()
+        qpos[len(qpos) - len(fingers) :] = fingers
+        model.set_qpos(qpos, True)
+
     def _plan_from_the_base_now(self) -> None:
         """On a free-flying servicer, plan from the bus's pose now (it moves as the arm does)."""
         if getattr(self.env, "free_flyer", False):
@@ -233,6 +249,7 @@ class Oracle(Policy):
         """Collision-free IK solutions from a fixed set of starts (deterministic), nearest to ``near`` (the current
         arm joints by default) first."""
         self._plan_from_the_base_now()
+        self._plan_with_the_fingers_now()
         planner = self.solver.planner
         target = self.solver.base_pose.inv() * pose
         goal = np.concatenate([target.p, target.q])
@@ -251,6 +268,7 @@ class Oracle(Policy):
     def _screw_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Joint positions of a collision-free screw motion of the TCP from ``start`` to ``pose``, if any."""
         self._plan_from_the_base_now()
+        self._plan_with_the_fingers_now()
         planner = self.solver.planner
         try:
             result = planner.plan_screw(
@@ -300,6 +318,7 @@ class Oracle(Policy):
         if self.path_check_step is not None:
             steps = int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / self.path_check_step))
             samples = max(samples, steps + 1)
+        self._plan_with_the_fingers_now()
         planner = self.solver.planner
         for t in np.linspace(0.0, 1.0, samples):
             qpos = planner.pad_qpos(start + t * (goal - start))
@@ -316,6 +335,7 @@ class Oracle(Policy):
         command = self.hold_action()
         for step in range(steps):
             self._plan_from_the_base_now()
+            self._plan_with_the_fingers_now()
             goal = self.solver.base_pose.inv() * target(step)
             status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(self.arm_qpos()), n_init_qpos=1)
             if status == "Success":
