@@ -16,7 +16,9 @@ class EpisodeResult:
     episode_len: int
     """Steps until the first success, or all the steps the episode ran when it never succeeded."""
     failure: str = ""
-    """Why a scripted policy gave up (e.g. a planning failure); empty otherwise."""
+    """Why a scripted policy did not succeed: the reason it gave up (e.g. a planning failure), or, for one that
+    reports its phase (the oracles), ``time ran out while <phase>`` or ``the plan ended without success after <phase>``;
+    empty otherwise."""
     stage: Optional[int] = None
     """The highest ``info["stage"]`` the episode reached (staged tasks: the sockets filled in Solar Panel Assembly,
     the samples or pegs placed in the multi-object tasks); None where the env reports no stage."""

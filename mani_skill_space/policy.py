@@ -38,3 +38,7 @@ class WrapsOracle(Policy):
     @property
     def failure(self) -> Optional[str]:
         return self.oracle.failure
+
+    @property
+    def phase(self) -> str:
+        return self.oracle.phase

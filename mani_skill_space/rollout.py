@@ -68,9 +68,20 @@ def run_episode(
         success_at_end=success,
         episode_return=total,
         episode_len=first_success or steps,
-        failure=getattr(policy, "failure", None) or "",
+        failure=failure_of(policy, success),
         stage=stage,
     )
+
+
+def failure_of(policy, success_at_end: bool) -> str:
+    """``EpisodeResult.failure`` of an episode that ``policy`` ran to its end."""
+    if getattr(policy, "failure", None):
+        return policy.failure
+    if success_at_end or getattr(policy, "phase", None) is None:
+        return ""
+    if getattr(policy, "done", False):
+        return f"the plan ended without success after {policy.phase}"
+    return f"time ran out while {policy.phase}"
 
 
 def evaluate_policy(policy, env_id: str, env_kwargs: dict, seeds: Sequence[int]) -> dict[str, float]:

@@ -220,3 +220,21 @@ def test_an_oracle_can_plan_with_the_fingers_open_as_they_are():
         free[as_they_are] = oracle.path_is_free(here, here)
     env.close()
     assert free == {False: True, True: False}
+
+
+def test_an_episode_that_ends_before_the_plan_says_what_the_oracle_was_doing():
+    """Where the oracle neither gave up nor succeeded, the episode's failure says what it was doing when time ran out
+    (or, if its plan had ended, what it did last), so that a suite's results tell a slow motion from a lost object."""
+    from mani_skill_space.oracles.base import Oracle
+    from mani_skill_space.policies import OraclePolicy, RandomPolicy
+
+    env = gym.make("PegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none", max_episode_steps=10)
+    assert run_episode(env, OraclePolicy(), 2000).failure == "time ran out while pre-grasp"
+    assert run_episode(env, RandomPolicy(), 2000).failure == ""  # a learner reports no phase
+
+    class WaitsForSuccess(Oracle):
+        def plan(self, env):
+            yield from self.wait_for_success(2)
+
+    assert run_episode(env, WaitsForSuccess(), 2000).failure == "the plan ended without success after waiting for success"
+    env.close()

@@ -74,6 +74,9 @@ class Oracle(Policy):
         self.last_action: Optional[np.ndarray] = None
         self.done = False
         self.failure: Optional[str] = None
+        self.phase = "start"
+        """What the plan is doing now (the motion under way, e.g. ``"pre-grasp"``, ``"insert"``): the runners report it
+        for an episode that ends before the plan does."""
         self._actions = self.plan(self.env)
 
     def act(self, obs) -> np.ndarray:
@@ -143,6 +146,7 @@ class Oracle(Policy):
         """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
         collision-free IK solution) at ``speed`` times the usual joint limits (and ``acceleration`` times the
         usual accelerations, on top); ``settle_steps`` more steps hold the goal so the arm catches up."""
+        self.phase = what
         # on a free-flying servicer the motion moves the bus, so the hand ends off the goal by the bus's drift:
         # a few shorter motions planned from where the bus is then close in on it
         corrections = FREE_FLYER_CORRECTIONS if getattr(self.env, "free_flyer", False) else 0
@@ -222,6 +226,7 @@ class Oracle(Policy):
     def joint_move(self, goal: np.ndarray, what: str, acceleration: float = 1.0) -> Iterator[np.ndarray]:
         """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised (at ``acceleration``
         times the usual joint accelerations)."""
+        self.phase = what
         start = self.arm_qpos()
         if not self.path_is_free(start, goal):
             raise PlanningFailed(f"the joint-space move to the {what} pose collides")
@@ -331,6 +336,7 @@ class Oracle(Policy):
         """Closed-loop Cartesian servo: at every step, the TCP pose ``target(step)`` (recomputed from the scene as
         it is now), solved by IK from the current joints and sent as the joint target. Where a step's pose has no
         solution (e.g. pressing past a stop) the previous target is held."""
+        self.phase = what
         planner = self.solver.planner
         command = self.hold_action()
         for step in range(steps):
@@ -345,6 +351,7 @@ class Oracle(Policy):
     def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
         """Hold still until the task has reported success for ``stable_steps`` steps in a row (e.g. a released
         object has come to rest), at most ``most_steps`` steps."""
+        self.phase = "waiting for success"
         streak = 0
         for _ in range(most_steps):
             streak = streak + 1 if bool(self.env.evaluate()["success"][0]) else 0
@@ -369,6 +376,7 @@ class Oracle(Policy):
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
         PlanningFailed if it has not within ``most_steps``."""
+        self.phase = f"grasping {what}"
         for _ in range(most_steps):
             if bool(self.env.is_grasping(actor)[0]):
                 return
@@ -376,12 +384,14 @@ class Oracle(Policy):
         raise PlanningFailed(f"the grasp missed {what}")
 
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
+        self.phase = "closing the gripper" if state < self.gripper else "opening the gripper"
         self.gripper = state
         yield from self._follow(np.repeat(self.arm_qpos()[None], steps, axis=0), retime=False)
 
     def open_gently(self, steps: int = 12) -> Iterator[np.ndarray]:
         """Open the gripper a little at a time, so that a released object is not flicked (in zero gravity it
         would keep the spin)."""
+        self.phase = "letting go"
         arm = self.hold_action()[:-1]
         for gripper in np.linspace(self.gripper, GRIPPER_OPEN, steps + 1)[1:]:
             self.gripper = float(gripper)

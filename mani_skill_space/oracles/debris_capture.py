@@ -214,6 +214,7 @@ class DebrisCaptureOracle(Oracle):
         """Hold the open hand still at the meeting pose until the debris is close. On a free-flying servicer the
         swing there has moved and turned the bus (a few centimetres and degrees, enough to put the hand beside the
         debris' path), so the hand is servoed back onto the meeting pose, planned from where the bus is now."""
+        self.phase = "waiting for the debris"
         free_flyer = getattr(env, "free_flyer", False)
         for _ in range(int(LATEST_MEETING / env.control_timestep)):
             position, _ = self._debris_state(env)
