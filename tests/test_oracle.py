@@ -238,3 +238,118 @@ def test_an_episode_that_ends_before_the_plan_says_what_the_oracle_was_doing():
 
     assert run_episode(env, WaitsForSuccess(), 2000).failure == "the plan ended without success after waiting for success"
     env.close()
+
+
+def _peg_target(env, **changes):
+    from dataclasses import replace
+
+    from mani_skill_space.oracles.insertion import PegTarget
+
+    return replace(PegTarget.of(env.unwrapped, env.unwrapped.peg, 0), **changes)
+
+
+def test_the_fingers_of_a_planned_grasp_stay_clear_of_the_surface_round_the_hole(inserter):
+    """With the peg at the bottom, the fingers closed on it must stay SURFACE_CLEARANCE above the level surface round
+    the entrance: a finger just touching it stops a push into a tilted hole short of the bottom."""
+    from mani_skill_space.oracles.insertion import SURFACE_CLEARANCE
+
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)  # an upright hole, its entrance 4 cm up
+    hand_down = sapien.Pose(q=[0.0, 1.0, 0.0, 0.0]).to_transformation_matrix()
+    grip_half_width = 0.01
+    corners = inserter.finger_corners.copy()
+    corners[:, 1] -= np.sign(corners[:, 1]) * max(0.0, np.abs(corners[:, 1]).min() - grip_half_width)
+    lowest_below_tcp = -(corners @ hand_down[:3, :3].T)[:, 2].min()
+    for clearance, clears in ((SURFACE_CLEARANCE + 0.0005, True), (SURFACE_CLEARANCE - 0.0005, False), (0.0, False)):
+        hand = hand_down.copy()
+        hand[2, 3] = 0.04 + clearance + lowest_below_tcp
+        assert inserter._fingers_clear_surface(target, hand, grip_half_width) is clears
+
+
+class _ArmsOverTheHole:
+    """A stand-in oracle whose IK over the hole finds ``arms`` (each free to reach) and whose push from each keeps the
+    given joint-limit margin (None: no straight push)."""
+
+    def __init__(self, arms_and_margins):
+        self.margins = {float(arm[0]): margin for arm, margin in arms_and_margins}
+        self.arms = [arm for arm, _ in arms_and_margins]
+
+    def ik_solutions(self, pose, near=None):
+        return list(self.arms)
+
+    def path_is_free(self, start, goal):
+        return True
+
+    def obstacles_only(self, choose):
+        from contextlib import nullcontext
+
+        return nullcontext()
+
+    def screw_limit_margin(self, start, pose):
+        return self.margins[float(start[0])]
+
+
+@pytest.mark.parametrize(
+    "margins, chosen",
+    [
+        ((0.05, 0.2, 0.3), 1),  # the first that keeps PUSH_JOINT_MARGIN, not the first feasible
+        ((None, 0.05, 0.1), 2),  # none keeps it: the one that keeps farthest
+        ((None, None), None),  # no push at all
+    ],
+)
+def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter, margins, chosen):
+    from mani_skill_space.oracles.insertion import PegInserter
+
+    arms = [np.full(7, float(i)) for i in range(len(margins))]
+    planner = PegInserter.__new__(PegInserter)
+    planner.oracle, planner.planned_arm = _ArmsOverTheHole(list(zip(arms, margins))), None
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
+    found = planner._insertion_arm(target, 0.0, np.eye(4))
+    if chosen is None:
+        assert found is None
+    else:
+        np.testing.assert_array_equal(found[0], arms[chosen])
+        assert found[1] == margins[chosen]
+
+
+def test_a_screw_motions_joint_limit_margin_is_its_least_along_the_way(inserter):
+    oracle = inserter.oracle
+    start = oracle.arm_qpos()
+    up = sapien.Pose(oracle.tcp_pose().p + [0.0, 0.0, 0.05], oracle.tcp_pose().q)
+    path = oracle._screw_path(start, up)
+    margin = oracle.screw_limit_margin(start, up)
+    assert margin == pytest.approx(min(oracle.joint_limit_margin(q[: len(start)]) for q in path))
+    assert margin <= oracle.joint_limit_margin(start) + 1e-9
+    into_the_ground = sapien.Pose([oracle.tcp_pose().p[0], oracle.tcp_pose().p[1], -0.2], oracle.tcp_pose().q)
+    assert oracle.screw_limit_margin(start, into_the_ground) is None
+
+
+def test_the_push_leads_the_tip_by_at_most_push_lead_once_it_is_in_the_hole():
+    from mani_skill_space.oracles.insertion import PUSH_LEAD, _led_height
+
+    depth = 0.03
+    assert _led_height(0.01, 0.05, depth) == 0.01  # above the entrance: the schedule
+    assert _led_height(0.01, 0.025, depth) == pytest.approx(0.025 - PUSH_LEAD)  # in the hole and lagging: bounded
+    assert _led_height(0.022, 0.025, depth) == 0.022  # in the hole, keeping up: the schedule
+
+
+def test_an_oracle_keeps_pressing_after_its_push_where_asked(inserter):
+    """Waiting for success after a push, the Peg-in-Hole oracle holds its last target, not the joints where they are
+    (short of it: the arm would ease off and a pressed peg spring back)."""
+    from mani_skill_space.oracles.base import Oracle
+
+    class Presses(Oracle):
+        keep_pressing = True
+
+        def plan(self, env):
+            yield self.hold_action() + np.r_[np.full(7, 0.01), 0.0].astype(np.float32)
+            yield from self.wait_for_success(3, keep_pressing=self.keep_pressing)
+
+    env = inserter.oracle.env
+    for keep_pressing in (True, False):
+        oracle = Presses()
+        oracle.keep_pressing = keep_pressing
+        oracle.reset(env, 0)
+        pressed = oracle.act(None)
+        waits = [oracle.act(None) for _ in range(3)]
+        for action in waits:
+            np.testing.assert_array_equal(action, pressed if keep_pressing else oracle.hold_action())

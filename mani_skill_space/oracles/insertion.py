@@ -4,10 +4,12 @@ Before touching the peg it plans the whole insertion: the hand will take the lyi
 the peg's tip (and, failing that, rolled about the peg's axis, or with the wrist turned half a turn), which fixes
 how it will hold the peg over the hole for each twist the profile's symmetry allows; the first grasp and twist
 (the hand pointing down and away from the arm first) for which the arm can reach the pre-grasp and grasp poses,
-lift the peg, swing it over the entrance and push it straight to the bottom wins. Then: grasp, lift, line the
+lift the peg, swing it over the entrance and push it straight to the bottom wins (one whose push keeps
+``PUSH_JOINT_MARGIN`` from every joint limit before any that does not). Then: grasp, lift, line the
 tip up above the entrance, re-measure the peg in the hand and correct, and servo the tip down the hole's axis,
-re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that);
-a push that jams is backed off and tried again. The planner sees the hole's surroundings whole, except near
+re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that),
+its target never more than ``PUSH_LEAD`` ahead of the tip once it is in; a push that jams is backed off and tried
+again. The planner sees the hole's surroundings whole, except near
 the hole's axis while the peg goes in (``outside_keepout``), where the fingers holding the peg must pass.
 
 The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_space.envs.insertion``).
@@ -97,6 +99,17 @@ AXIS_KEEPOUT = 0.04
 the planner's obstacles: the fingers holding the peg come that close to it."""
 KEEPOUT_BELOW_ENTRANCE = 0.01
 """...down to this far below the entrance (the fingers hold the peg above it)."""
+PUSH_JOINT_MARGIN = 0.15
+"""rad: a push planned this close to a joint limit (anywhere along it) is taken only where no other is feasible: the
+servo's IK, re-solved from the joints as they are, finds no solution near a limit and the push stalls (traced on
+seeds 2000-2049: pushes that stopped 3-9 mm short with a wrist joint within 0.05 rad of its limit)."""
+SURFACE_CLEARANCE = 0.001
+"""m: the fingers closed on a peg pressed home must stay this far above the level surface round the entrance."""
+PUSH_LEAD = 0.005
+"""m: once the tip is in the hole, the push's target leads it down the axis by at most this much: a target far below
+a tip that has stopped presses the peg hard against the wall and turns it in the hand."""
+PUSH_EXTRA_STEPS = 8
+"""Steps added to the push for the tip that lags its schedule (``PUSH_LEAD``)."""
 
 
 @dataclass
@@ -207,12 +220,22 @@ class PegInserter:
         for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
             yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
         heights = _push_heights(depth + PRE_INSERT_GAP, self.settings.insert_step)
-        yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, heights[min(step, len(heights) - 1)])), len(heights) + SETTLE_STEPS, "insert")
+
+        def tip_goal(step: int) -> sapien.Pose:
+            height = _led_height(heights[min(step, len(heights) - 1)], self._tip_height(target, end), depth)
+            return self._tcp_for_tip(target, end, _along_axis(bottom, twist, height))
+
+        yield from self.oracle.servo(tip_goal, len(heights) + SETTLE_STEPS + PUSH_EXTRA_STEPS, "insert")
 
     @staticmethod
-    def _inserted_fraction(target: PegTarget, end: int) -> float:
+    def _tip_height(target: PegTarget, end: int) -> float:
+        """How far (m) the peg's tip is above the hole's bottom, along its axis."""
         tip = target.end_frames()[end][:3, 3]
-        return 1.0 - float((tip - target.bottom[:3, 3]) @ target.bottom[:3, 2]) / target.depth
+        return float((tip - target.bottom[:3, 3]) @ target.bottom[:3, 2])
+
+    @classmethod
+    def _inserted_fraction(cls, target: PegTarget, end: int) -> float:
+        return 1.0 - cls._tip_height(target, end) / target.depth
 
     # ------------------------------------------------------------------ planning
     def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
@@ -225,7 +248,10 @@ class PegInserter:
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
+        fallback = None  # the first feasible plan, where none keeps the push PUSH_JOINT_MARGIN from the joint limits
         for grasp, checked in self._grasp_candidates(target, tip, peg_points):
+            if not checked and fallback is not None:
+                break
             if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
             with self._reaching():
@@ -243,9 +269,16 @@ class PegInserter:
                     continue
                 with self._reaching():
                     found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
-                if found is not None:
-                    self.planned_arm = found
+                if found is None:
+                    continue
+                arm, margin = found
+                if margin >= PUSH_JOINT_MARGIN:
+                    self.planned_arm = arm
                     return grasp, float(twist)
+                fallback = fallback or (arm, grasp, float(twist))
+        if fallback is not None:
+            self.planned_arm = fallback[0]
+            return fallback[1], fallback[2]
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
     def _fingers_meet_sides(self, grasp: sapien.Pose, peg_points: np.ndarray) -> bool:
@@ -296,20 +329,27 @@ class PegInserter:
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
         # a push that stops just short of the bottom still inserts the peg, and the hand may come lower over the
         # hole, nearer the arm's reach: the last resorts
+        fallback = None  # the first feasible line-up, where none keeps the push PUSH_JOINT_MARGIN from the joint limits
         for approach_gap in LINE_UP_GAPS:
             for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
                 for candidate in twists:
-                    arm = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
-                    if arm is not None:
-                        return arm, float(candidate)
+                    found = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
+                    if found is None:
+                        continue
+                    if found[1] >= PUSH_JOINT_MARGIN:
+                        return found[0], float(candidate)
+                    fallback = fallback or (found[0], float(candidate))
+        if fallback is not None:
+            return fallback
         raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
 
     def _insertion_arm(
         self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
-    ) -> Optional[np.ndarray]:
+    ) -> Optional[tuple[np.ndarray, float]]:
         """An arm configuration holding the tip ``approach_gap`` over the hole on its axis (with ``tip_in_hand``) from which a
-        straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it; None if there
-        is none."""
+        straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it,
+        with the push's least joint-limit margin: the first whose push keeps ``PUSH_JOINT_MARGIN`` from the limits, else the
+        one whose push keeps farthest from them; None if there is none."""
         bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
         pressed = hand(push_to)
@@ -318,8 +358,17 @@ class PegInserter:
         if self.planned_arm is not None:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
         arms = [arm for arm in solutions if start is None or self.oracle.path_is_free(start, arm)]
+        best = None
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
-            return next((arm for arm in arms if self.oracle.screw_is_feasible(arm, pressed)), None)
+            for arm in arms:
+                margin = self.oracle.screw_limit_margin(arm, pressed)
+                if margin is None:
+                    continue
+                if margin >= PUSH_JOINT_MARGIN:
+                    return arm, margin
+                if best is None or margin > best[1]:
+                    best = (arm, margin)
+        return best
 
     def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> Iterator[tuple[sapien.Pose, bool]]:
         """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp
@@ -366,7 +415,7 @@ class PegInserter:
         lowest = (corners @ hand_pressed[:3, :3].T + hand_pressed[:3, 3])[:, 2].min()
         bottom = target.bottom
         entrance_height = bottom[2, 3] + target.depth * bottom[2, 2]
-        return bool(lowest >= entrance_height)
+        return bool(lowest >= entrance_height + SURFACE_CLEARANCE)
 
     def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float, roll: float = 0.0, extra_reach: float = 0.0) -> sapien.Pose:
         """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip and rolled by ``roll``
@@ -441,6 +490,12 @@ def _push_heights(start: float, step: float) -> np.ndarray:
     fast = np.arange(start - step, SEATING_HEIGHT, -step)
     slow = np.arange(min(SEATING_HEIGHT, start), -PRESS_DEPTH, -SEATING_STEP)
     return np.concatenate([fast, slow, [-PRESS_DEPTH]])
+
+
+def _led_height(scheduled: float, tip_height: float, depth: float) -> float:
+    """The push's target height for the tip (above the hole's bottom): the schedule's, but once the tip is in the
+    hole (below ``depth``) no more than ``PUSH_LEAD`` below where the tip is."""
+    return max(scheduled, tip_height - PUSH_LEAD) if tip_height < depth else scheduled
 
 
 def _twists(order: int) -> np.ndarray:

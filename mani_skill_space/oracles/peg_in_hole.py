@@ -34,7 +34,7 @@ class PegInHoleOracle(Oracle):
         self.make_solver(env, obstacles=surface_points(env.hole_assets[0], module))
         wide_module = surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN)
         yield from PegInserter(self, PEG_IN_HOLE_INSERTION, reach_obstacles=wide_module).insert(target)
-        yield from self.wait_for_success(20)
+        yield from self.wait_for_success(20, keep_pressing=True)
 
 
 MULTI_INSERTION_ORDER = (0, 3, 1, 2)
