@@ -37,10 +37,10 @@ POINT_SPACING = 0.02
 """About one obstacle point per 2 x 2 cm of surface: no arm link fits between them."""
 GROUND_REACH = 1.0
 GROUND_MARGIN = 0.02
-SCREW_STEP = 0.02
-"""rad: the joint step of mplib's screw motions. mplib follows the screw with first-order (Jacobian) steps of this size and
-never corrects their drift: at its default, 0.1, 39 of the 98 screw motions of the traced Peg-in-Hole episodes ended 5-11
-mm from their goal; at 0.02 none did."""
+FINE_SCREW_STEP = 0.02
+"""rad: a finer joint step for mplib's screw motions (``Oracle.screw_step``). mplib follows the screw with first-order
+(Jacobian) steps of that size and never corrects their drift: at its default, 0.1, 39 of the 98 screw motions of the
+traced Peg-in-Hole episodes ended 5-11 mm from their goal; at 0.02 none did."""
 JOINT_VELOCITY_LIMIT = 2.0
 JOINT_ACCELERATION_LIMIT = 4.0
 """rad/s and rad/s^2 for every arm joint: about 0.9x the Panda's velocity limits (ManiSkill's solutions use 0.9
@@ -66,6 +66,10 @@ class Oracle(Policy):
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
     swing."""
+
+    screw_step: float = 0.1
+    """rad: the joint step of the screw motions (mplib's default; the insertion oracles, whose pegs go into holes 1 mm wider
+    than them, use ``FINE_SCREW_STEP``)."""
 
     plans_with_the_fingers_as_they_are: bool = False
     """Where set, the planner's Panda has its fingers where the simulated ones are (open, or closed on what the hand
@@ -283,7 +287,7 @@ class Oracle(Policy):
             result = planner.plan_screw(
                 np.concatenate([pose.p, pose.q]),
                 planner.pad_qpos(start.copy()),
-                qpos_step=SCREW_STEP,
+                qpos_step=self.screw_step,
                 time_step=self.env.control_timestep,
                 use_point_cloud=self.solver.use_point_cloud,
             )

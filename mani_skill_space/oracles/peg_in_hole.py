@@ -10,7 +10,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mani_skill_space.oracles.base import Oracle, PlanningFailed, surface_points
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, surface_points
 from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES, STILL_IN_FRACTION
@@ -27,6 +27,7 @@ PEG_IN_HOLE_INSERTION = InsertionSettings(insert_step=0.004, refine_passes=1)
 
 
 class PegInHoleOracle(Oracle):
+    screw_step = FINE_SCREW_STEP
     def plan(self, env) -> Iterator[np.ndarray]:
         target = PegTarget.of(env, env.peg, 0)
         module = np.eye(4)
@@ -51,6 +52,7 @@ class MultiPegInHoleOracle(Oracle):
     (``MULTI_INSERTION_ORDER``), letting go of it and backing straight up before the next, with the modules and
     the other pegs (those standing with a margin) as the planner's obstacles."""
 
+    screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
     """Standing pegs are thin: a check at 20 points of a long swing can step over one."""
     plans_with_the_fingers_as_they_are = True

@@ -14,7 +14,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
 from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs
 
 INSERTION_ORDER = (2, 3, 0, 1)
@@ -62,6 +62,7 @@ tried again."""
 
 
 class SolarPanelOracle(Oracle):
+    screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
     """Inserted pegs are thin and stand up high: a check at 20 points of a long swing can step over one."""
 
