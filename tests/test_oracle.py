@@ -312,15 +312,24 @@ def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter
 
 
 def test_a_screw_motions_joint_limit_margin_is_its_least_along_the_way(inserter):
+    """Turning the hand about its approach axis turns the wrist: one way toward its nearer limit, the other away. The
+    margin of each motion is the least of every joint's distance to its limits over the whole motion, ends
+    included; a goal in the ground has none."""
     oracle = inserter.oracle
     start = oracle.arm_qpos()
-    up = sapien.Pose(oracle.tcp_pose().p + [0.0, 0.0, 0.05], oracle.tcp_pose().q)
-    path = oracle._screw_path(start, up)
-    margin = oracle.screw_limit_margin(start, up)
-    assert margin == pytest.approx(min(oracle.joint_limit_margin(q[: len(start)]) for q in path))
-    assert margin <= oracle.joint_limit_margin(start) + 1e-9
-    into_the_ground = sapien.Pose([oracle.tcp_pose().p[0], oracle.tcp_pose().p[1], -0.2], oracle.tcp_pose().q)
-    assert oracle.screw_limit_margin(start, into_the_ground) is None
+    hand = oracle.tcp_pose()
+    margins = []
+    for turn in (1.5, -1.5):
+        turned = hand * sapien.Pose(q=[np.cos(turn / 2), 0.0, 0.0, np.sin(turn / 2)])
+        path = oracle._screw_path(start, turned)
+        assert path is not None
+        margin = oracle.screw_limit_margin(start, turned)
+        per_step = [oracle.joint_limit_margin(q[: len(start)]) for q in path]
+        assert margin == pytest.approx(min(per_step))
+        assert margin <= min(oracle.joint_limit_margin(start), oracle.joint_limit_margin(path[-1][: len(start)])) + 1e-9
+        margins.append(margin)
+    assert abs(margins[0] - margins[1]) > 0.1  # the two ways differ: toward a limit and away from it
+
 
 
 def test_the_push_leads_the_tip_by_at_most_push_lead_once_it_is_in_the_hole():
@@ -367,11 +376,56 @@ def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):
     def miss(step):
         oracle.screw_step = step
         path = oracle._screw_path(start, goal)
+        assert path is not None
         positions, _ = oracle._tcp_poses([path[-1][: len(start)]])
         return np.linalg.norm(positions[0] - goal.p)
 
-    fine = type(oracle).screw_step
     try:
-        assert miss(fine) < 0.001 < 0.002 < miss(0.1)
+        assert miss(type(oracle).screw_step) < 0.001
+        assert miss(0.1) > 0.002
     finally:
-        oracle.screw_step = fine
+        del oracle.screw_step
+
+
+class _HandAtRest:
+    def tcp_pose(self):
+        return sapien.Pose()
+
+    def arm_qpos(self):
+        return np.zeros(7)
+
+
+@pytest.mark.parametrize(
+    "margins, chosen",
+    [
+        ({(1, 0): 0.2}, (1, 0)),  # the planned twist's push is near a limit: the nearest other twist that keeps clear
+        ({}, (0, 0)),  # none keeps clear: the first feasible (the planned twist, the usual line-up)
+        ({(0, 5): 0.2}, (0, 5)),  # only a last resort keeps clear (the hand lowest over the hole, a shallower push)
+        (None, None),  # nothing feasible
+    ],
+)
+def test_the_line_up_prefers_a_push_clear_of_the_joint_limits_then_the_first_feasible(inserter, margins, chosen):
+    """``_line_up`` tries the twists nearest the planned one in each of its tiers (approach gap x push depth); the first
+    whose push keeps PUSH_JOINT_MARGIN wins, else the first feasible one."""
+    from mani_skill_space.oracles.base import PlanningFailed
+    from mani_skill_space.oracles.insertion import ENOUGH_DEPTH_LEFT, LINE_UP_GAPS, PRESS_DEPTH, PegInserter
+
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04, symmetry=4, end_frames=lambda: np.stack([np.eye(4)] * 2))
+    tiers = [(gap, push_to) for gap in LINE_UP_GAPS for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth)]
+    planner = PegInserter.__new__(PegInserter)
+    planner.oracle = _HandAtRest()
+
+    def insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap):
+        if margins is None:
+            return None
+        key = (int(round(twist / (np.pi / 2))) % 4, tiers.index((approach_gap, push_to)))
+        return np.array(key, dtype=float), margins.get(key, 0.05)
+
+    planner._insertion_arm = insertion_arm
+    if chosen is None:
+        with pytest.raises(PlanningFailed):
+            planner._line_up(target, 0, 0.0)
+        return
+    arm, twist = planner._line_up(target, 0, 0.0)
+    np.testing.assert_array_equal(arm, chosen)
+    assert twist == pytest.approx(chosen[0] * np.pi / 2)

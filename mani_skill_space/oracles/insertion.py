@@ -109,7 +109,8 @@ PUSH_LEAD = 0.005
 """m: once the tip is in the hole, the push's target leads it down the axis by at most this much: a target far below
 a tip that has stopped presses the peg hard against the wall and turns it in the hand."""
 PUSH_EXTRA_STEPS = 8
-"""Steps added to the push for the tip that lags its schedule (``PUSH_LEAD``)."""
+"""Steps added to every push (the servo runs them all), so that a tip that lags its schedule (``PUSH_LEAD``) still
+reaches the bottom."""
 
 
 @dataclass
@@ -240,7 +241,11 @@ class PegInserter:
     # ------------------------------------------------------------------ planning
     def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
         """The first grasp (and twist over the hole) for which the whole insertion is feasible from where the arm
-        is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom."""
+        is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom, and whose push
+        keeps ``PUSH_JOINT_MARGIN`` from the joint limits; where no checked grasp's push does, the first feasible
+        one. The joint-limit margin thus ranks above the grasps' order (a weaker grasp whose push keeps clear of the
+        limits comes before a firm one whose push does not: measured, the stalled pushes cost more than the weaker
+        grasps). The unchecked last resorts are only tried where no checked grasp is feasible."""
         bottom, depth = target.bottom, target.depth
         tip = target.end_frames()[end]
         outward = bottom[:3, 3] - self.oracle.solver.base_pose.p
@@ -323,8 +328,11 @@ class PegInserter:
 
     def _line_up(self, target: PegTarget, end: int, twist: float) -> tuple[np.ndarray, float]:
         """An arm configuration over the hole, and its twist, given how the hand really holds the peg now (not
-        quite as planned: the fingers close on it where they meet it): the planned twist if it still works,
-        else the nearest other one the profile's symmetry allows."""
+        quite as planned: the fingers close on it where they meet it): the planned twist if its push still keeps
+        ``PUSH_JOINT_MARGIN`` from the joint limits, else the nearest other one the profile's symmetry allows that
+        does, then the same with the last resorts (a push that may stop just short of the bottom, the hand lower
+        over the hole; the margin is that of the push planned); where none keeps the margin, the first feasible
+        one in that order. (The fingers' clearance round the hole is not checked again here.)"""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
         # a push that stops just short of the bottom still inserts the peg, and the hand may come lower over the

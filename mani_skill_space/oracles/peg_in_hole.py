@@ -28,6 +28,7 @@ PEG_IN_HOLE_INSERTION = InsertionSettings(insert_step=0.004, refine_passes=1)
 
 class PegInHoleOracle(Oracle):
     screw_step = FINE_SCREW_STEP
+
     def plan(self, env) -> Iterator[np.ndarray]:
         target = PegTarget.of(env, env.peg, 0)
         module = np.eye(4)
