@@ -270,6 +270,8 @@ class _ArmsOverTheHole:
     """A stand-in oracle whose IK over the hole finds ``arms`` (each free to reach) and whose push from each keeps the
     given joint-limit margin (None: no straight push)."""
 
+    tcp_speed_limit = None
+
     def __init__(self, arms_and_margins):
         self.margins = {float(arm[0]): margin for arm, margin in arms_and_margins}
         self.arms = [arm for arm, _ in arms_and_margins]
@@ -310,6 +312,11 @@ def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter
     else:
         np.testing.assert_array_equal(found[0], arms[chosen])
         assert found[1] == margins[chosen]
+    # acting in pd_ee_delta_pose (its TCP speed limited) the oracle takes the first feasible push
+    planner.oracle.tcp_speed_limit = (0.03, 0.03)
+    found = planner._insertion_arm(target, 0.0, np.eye(4))
+    first = next((i for i, margin in enumerate(margins) if margin is not None), None)
+    assert (found is None) if first is None else np.array_equal(found[0], arms[first])
 
 
 def test_a_screw_motions_joint_limit_margin_is_its_least_along_the_way(inserter):
@@ -389,6 +396,8 @@ def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):
 
 
 class _HandAtRest:
+    tcp_speed_limit = None
+
     def tcp_pose(self):
         return sapien.Pose()
 

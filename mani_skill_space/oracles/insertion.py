@@ -101,8 +101,9 @@ KEEPOUT_BELOW_ENTRANCE = 0.01
 """...down to this far below the entrance (the fingers hold the peg above it)."""
 PUSH_JOINT_MARGIN = 0.15
 """rad: a push planned this close to a joint limit (anywhere along it) is taken only where no other is feasible: the
-servo's IK, re-solved from the joints as they are, finds no solution near a limit and the push stalls (traced on
-seeds 2000-2049: pushes that stopped 3-9 mm short with a wrist joint within 0.05 rad of its limit)."""
+servo's IK, re-solved from the joints as they are, finds no solution past a limit and the push stalls (traced on
+seeds 2000-2049, e.g. orbit 2049: the push stopped 2 mm short of the bottom with nothing touching, the shoulder at
+full stretch). Not for an oracle acting in ``pd_ee_delta_pose`` (``PegInserter.push_joint_margin``)."""
 SURFACE_CLEARANCE = 0.001
 """m: the fingers closed on a peg pressed home must stay this far above the level surface round the entrance."""
 PUSH_LEAD = 0.005
@@ -176,6 +177,13 @@ class PegInserter:
         self.planned_arm: Optional[np.ndarray] = None
         """The arm configuration over the hole that the plan found (its IK seeds the line-up with the peg as it
         really sits in the hand: from elsewhere the solver may find no solution a few millimetres away)."""
+
+    @property
+    def push_joint_margin(self) -> float:
+        """``PUSH_JOINT_MARGIN``, or none for an oracle whose TCP speed is limited (acting in ``pd_ee_delta_pose``): there
+        a push clear of the limits often comes with a grasp that the hand must turn farther to reach, which costs
+        time the episode does not have (the profile peg, Moon, seeds 6000-6049: 92% with the margin, 100% without)."""
+        return PUSH_JOINT_MARGIN if self.oracle.tcp_speed_limit is None else -np.inf
 
     def _reaching(self):
         """Plan with the ``reach_obstacles`` too, inside the block."""
@@ -277,7 +285,7 @@ class PegInserter:
                 if found is None:
                     continue
                 arm, margin = found
-                if margin >= PUSH_JOINT_MARGIN:
+                if margin >= self.push_joint_margin:
                     self.planned_arm = arm
                     return grasp, float(twist)
                 fallback = fallback or (arm, grasp, float(twist))
@@ -344,7 +352,7 @@ class PegInserter:
                     found = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
                     if found is None:
                         continue
-                    if found[1] >= PUSH_JOINT_MARGIN:
+                    if found[1] >= self.push_joint_margin:
                         return found[0], float(candidate)
                     fallback = fallback or (found[0], float(candidate))
         if fallback is not None:
@@ -372,7 +380,7 @@ class PegInserter:
                 margin = self.oracle.screw_limit_margin(arm, pressed)
                 if margin is None:
                     continue
-                if margin >= PUSH_JOINT_MARGIN:
+                if margin >= self.push_joint_margin:
                     return arm, margin
                 if best is None or margin > best[1]:
                     best = (arm, margin)
