@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Any, Callable, Generator, Iterator, Optional
+from typing import Any, Callable, Generator, Iterable, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -253,18 +253,32 @@ class PegInserter:
         keeps ``PUSH_JOINT_MARGIN`` from the joint limits; where no checked grasp's push does, the first feasible
         one. The joint-limit margin thus ranks above the grasps' order (a weaker grasp whose push keeps clear of the
         limits comes before a firm one whose push does not: measured, the stalled pushes cost more than the weaker
-        grasps). The unchecked last resorts are only tried where no checked grasp is feasible."""
-        bottom, depth = target.bottom, target.depth
+        grasps). The unchecked last resorts are only tried where no checked grasp is feasible: the first of them for which
+        the insertion is feasible is taken (with the twist whose push keeps the margin, if one does)."""
         tip = target.end_frames()[end]
-        outward = bottom[:3, 3] - self.oracle.solver.base_pose.p
+        outward = target.bottom[:3, 3] - self.oracle.solver.base_pose.p
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
-        fallback = None  # the first feasible plan, where none keeps the push PUSH_JOINT_MARGIN from the joint limits
-        for grasp, checked in self._grasp_candidates(target, tip, peg_points):
-            if not checked and fallback is not None:
-                break
+        candidates = list(self._grasp_candidates(target, tip, peg_points))
+        # all the checked grasps together, then each unchecked last resort on its own
+        groups = [[c for c in candidates if c[1]]] + [[c] for c in candidates if not c[1]]
+        for group in groups:
+            plan = _clear_else_first(self._feasible_plans(target, tip, start, outward, peg_points, group), self.push_joint_margin)
+            if plan is not None:
+                self.planned_arm, grasp, twist = plan
+                return grasp, twist
+        raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+
+    def _feasible_plans(
+        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list
+    ) -> Iterator[tuple[tuple[np.ndarray, sapien.Pose, float], float]]:
+        """For each of ``candidates`` (grasp, whether its fingers are checked) in turn and each twist over the hole
+        (the hand pointing down and away from the arm first), the plans (arm over the hole, grasp, twist) for
+        which the whole insertion is feasible from ``start``, each with its push's joint-limit margin."""
+        bottom, depth = target.bottom, target.depth
+        for grasp, checked in candidates:
             if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
             with self._reaching():
@@ -282,17 +296,8 @@ class PegInserter:
                     continue
                 with self._reaching():
                     found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
-                if found is None:
-                    continue
-                arm, margin = found
-                if margin >= self.push_joint_margin:
-                    self.planned_arm = arm
-                    return grasp, float(twist)
-                fallback = fallback or (arm, grasp, float(twist))
-        if fallback is not None:
-            self.planned_arm = fallback[0]
-            return fallback[1], fallback[2]
-        raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
+                if found is not None:
+                    yield (found[0], grasp, float(twist)), found[1]
 
     def _fingers_meet_sides(self, grasp: sapien.Pose, peg_points: np.ndarray) -> bool:
         """Whether each finger, closing from ``grasp`` on the lying peg (its collision vertices ``peg_points``),
@@ -343,20 +348,20 @@ class PegInserter:
         one in that order. (The fingers' clearance round the hole is not checked again here.)"""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
-        # a push that stops just short of the bottom still inserts the peg, and the hand may come lower over the
-        # hole, nearer the arm's reach: the last resorts
-        fallback = None  # the first feasible line-up, where none keeps the push PUSH_JOINT_MARGIN from the joint limits
-        for approach_gap in LINE_UP_GAPS:
-            for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
-                for candidate in twists:
-                    found = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
-                    if found is None:
-                        continue
-                    if found[1] >= self.push_joint_margin:
-                        return found[0], float(candidate)
-                    fallback = fallback or (found[0], float(candidate))
-        if fallback is not None:
-            return fallback
+
+        def line_ups() -> Iterator[tuple[tuple[np.ndarray, float], float]]:
+            # a push that stops just short of the bottom still inserts the peg, and the hand may come lower over the
+            # hole, nearer the arm's reach: the last resorts
+            for approach_gap in LINE_UP_GAPS:
+                for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
+                    for candidate in twists:
+                        found = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
+                        if found is not None:
+                            yield (found[0], float(candidate)), found[1]
+
+        line_up = _clear_else_first(line_ups(), self.push_joint_margin)
+        if line_up is not None:
+            return line_up
         raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
 
     def _insertion_arm(
@@ -506,6 +511,18 @@ def _push_heights(start: float, step: float) -> np.ndarray:
     fast = np.arange(start - step, SEATING_HEIGHT, -step)
     slow = np.arange(min(SEATING_HEIGHT, start), -PRESS_DEPTH, -SEATING_STEP)
     return np.concatenate([fast, slow, [-PRESS_DEPTH]])
+
+
+def _clear_else_first(plans: Iterable[tuple[Any, float]], margin: float) -> Optional[Any]:
+    """Of ``plans`` (each with its push's joint-limit margin), the first whose push keeps ``margin`` from the limits,
+    else the first; None if there is none. Stops drawing plans at the first that keeps the margin."""
+    first = None
+    for plan, plan_margin in plans:
+        if plan_margin >= margin:
+            return plan
+        if first is None:
+            first = plan
+    return first
 
 
 def _led_height(scheduled: float, tip_height: float, depth: float) -> float:
