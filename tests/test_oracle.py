@@ -350,26 +350,21 @@ def test_the_push_leads_the_tip_by_at_most_push_lead_once_it_is_in_the_hole():
 
 
 def test_an_oracle_keeps_pressing_after_its_push_where_asked(inserter):
-    """Waiting for success after a push, the Peg-in-Hole oracle holds its last target, not the joints where they are
-    (short of it: the arm would ease off and a pressed peg spring back)."""
+    """Once its plan has ended with a push, an oracle holds its last target, not the joints where they are (short of
+    it: the arm would ease off and a pressed peg spring back). The Peg-in-Hole oracle's plan ends with its push."""
     from mani_skill_space.oracles.base import Oracle
 
     class Presses(Oracle):
-        keep_pressing = True
-
         def plan(self, env):
             yield self.hold_action() + np.r_[np.full(7, 0.01), 0.0].astype(np.float32)
-            yield from self.wait_for_success(3, keep_pressing=self.keep_pressing)
 
-    env = inserter.oracle.env
-    for keep_pressing in (True, False):
-        oracle = Presses()
-        oracle.keep_pressing = keep_pressing
-        oracle.reset(env, 0)
-        pressed = oracle.act(None)
-        waits = [oracle.act(None) for _ in range(3)]
-        for action in waits:
-            np.testing.assert_array_equal(action, pressed if keep_pressing else oracle.hold_action())
+    oracle = Presses()
+    oracle.reset(inserter.oracle.env, 0)
+    pressed = oracle.act(None)
+    assert not np.array_equal(pressed, oracle.hold_action())
+    for _ in range(3):
+        np.testing.assert_array_equal(oracle.act(None), pressed)
+    assert oracle.done
 
 
 def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):

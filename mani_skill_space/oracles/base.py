@@ -365,19 +365,16 @@ class Oracle(Policy):
                 command = np.hstack([solutions[0][: len(self.arm_qpos())], self.gripper]).astype(np.float32)
             yield command
 
-    def wait_for_success(self, most_steps: int, stable_steps: int = 3, keep_pressing: bool = False) -> Iterator[np.ndarray]:
+    def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
         """Hold still until the task has reported success for ``stable_steps`` steps in a row (e.g. a released
-        object has come to rest), at most ``most_steps`` steps. ``keep_pressing``: hold the last joint target sent
-        rather than the joints where they are (after a push, where they are is short of it: holding that, the arm
-        eases off and a pressed peg springs back)."""
+        object has come to rest), at most ``most_steps`` steps."""
         self.phase = "waiting for success"
         streak = 0
-        hold = self.last_action if keep_pressing else None
         for _ in range(most_steps):
             streak = streak + 1 if bool(self.env.evaluate()["success"][0]) else 0
             if streak >= stable_steps:
                 return
-            yield hold if hold is not None else self.hold_action()
+            yield self.hold_action()
 
     def first_reachable(self, poses: list[sapien.Pose], what: str, **motion) -> Iterator[np.ndarray]:
         """``screw_to`` the first of ``poses`` the arm can move to from where it is (e.g. a retreat straight up, as far

@@ -27,6 +27,10 @@ PEG_IN_HOLE_INSERTION = InsertionSettings(insert_step=0.004, refine_passes=1)
 
 
 class PegInHoleOracle(Oracle):
+    """Oracle for PegInHoleAssembly-v1. Its plan ends with the push: from then on ``Oracle.act`` holds the push's last
+    target, so the arm keeps pressing the peg home (waiting for success holding the joints where they are, short of
+    that target, the arm eased off and a pressed peg sprang back out)."""
+
     screw_step = FINE_SCREW_STEP
 
     def plan(self, env) -> Iterator[np.ndarray]:
@@ -36,7 +40,6 @@ class PegInHoleOracle(Oracle):
         self.make_solver(env, obstacles=surface_points(env.hole_assets[0], module))
         wide_module = surface_points(env.hole_assets[0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN)
         yield from PegInserter(self, PEG_IN_HOLE_INSERTION, reach_obstacles=wide_module).insert(target)
-        yield from self.wait_for_success(20, keep_pressing=True)
 
 
 MULTI_INSERTION_ORDER = (0, 3, 1, 2)
