@@ -8,6 +8,7 @@ import sapien
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
 from mani_skill_space.oracles.base import _finger_box_corners, _trapezoid
+from mani_skill_space.oracles.debris_capture import FAST_SWING
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
@@ -74,6 +75,17 @@ def test_oracle_captures_debris(domain, asset_source, seed):
     result = run_episode(env, oracle_for("DebrisCapture-v1"), seed)
     assert result.success_at_end, (domain, asset_source, seed, result.failure)
     env.close()
+
+
+def test_oracle_swings_briskly_to_debris_it_cannot_meet_at_the_usual_pace():
+    """Seed 63040 (a tuning seed): a 3U CubeSat flies low at the arm's base, and the only meetings the usual swing
+    reaches in time are where the debris would sweep into the arm; the brisker swing meets it sooner, and catches it."""
+    env = gym.make("DebrisCapture-v1", domain="orbit", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    oracle = oracle_for("DebrisCapture-v1")
+    result = run_episode(env, oracle, 63040)
+    env.close()
+    assert result.success_at_end, result.failure
+    assert oracle.swing_acceleration == FAST_SWING
 
 
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back

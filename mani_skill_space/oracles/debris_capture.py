@@ -5,7 +5,7 @@ rest relative to them), close, keep moving with it while braking gently to a sto
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import Iterator, Optional
 
 import numpy as np
 import sapien
@@ -51,6 +51,9 @@ OPEN_FINGER_GAP = 0.04
 """Half the gap (m) between the open fingers' pads."""
 BRAKE_STEPS = 12
 HOLD_STEPS = 60
+FAST_SWING = 1.875
+"""Acceleration scale of the swing to a meeting that the usual swing cannot reach in time: 7.5 rad/s^2 on every joint
+(``base.JOINT_ACCELERATION_LIMIT`` is 4), the lowest of the Panda's own joint limits (7.5-20 rad/s^2, joint 2's)."""
 
 
 DEBRIS_BALL = "debris_ball"
@@ -61,7 +64,7 @@ class DebrisCaptureOracle(Oracle):
     def plan(self, env) -> Iterator[np.ndarray]:
         self.make_solver(env)
         meeting, arm = self._meeting_point(env)
-        yield from self.joint_move(arm, "meeting")
+        yield from self.joint_move(arm, "meeting", acceleration=self.swing_acceleration)
         yield from self._wait_for_debris(env, meeting)
         self._grip_orientation = meeting.q
         yield from self._follow_debris(env, meeting)
@@ -118,7 +121,19 @@ class DebrisCaptureOracle(Oracle):
         return self.env.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
 
     def _meeting_point(self, env) -> tuple[sapien.Pose, np.ndarray]:
-        """The first point of the predicted path the hand can reach before the debris does, and the arm pose."""
+        """The first point of the predicted path the hand can reach before the debris does, and the arm pose. The
+        swing there (``swing_acceleration``) is the usual one, else, where no point can be reached in time at it,
+        ``FAST_SWING`` times as brisk (so that where the usual swing does, nothing changes)."""
+        for acceleration in (1.0, FAST_SWING):
+            with self._speed(1.0, acceleration):
+                found = self._first_meeting(env)
+            if found is not None:
+                self.swing_acceleration = acceleration
+                return found
+        raise PlanningFailed("the debris never passes where the hand can meet it in time")
+
+    def _first_meeting(self, env) -> Optional[tuple[sapien.Pose, np.ndarray]]:
+        """``_meeting_point`` at the planner's present speed limits, or None."""
         position, velocity = self._debris_state(env)
         gravity = np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)
         shoulder = self.solver.base_pose.p + np.array([0.0, 0.0, SHOULDER_HEIGHT])
@@ -133,7 +148,7 @@ class DebrisCaptureOracle(Oracle):
             found = self._search_meeting(env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only, along_the_fingers)
             if found is not None:
                 return found
-        raise PlanningFailed("the debris never passes where the hand can meet it in time")
+        return None
 
     def _search_meeting(self, env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only: bool, along_the_fingers: bool):
         """The first meeting (grasp pose, arm joints) on the predicted path, or None: where ``broadside_only``, only
