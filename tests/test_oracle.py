@@ -379,6 +379,21 @@ def test_an_oracle_keeps_pressing_after_its_push_where_asked(inserter):
     assert oracle.done
 
 
+def test_a_servo_step_never_jumps_to_another_branch_of_the_arm(inserter, monkeypatch):
+    """Near a joint limit, IK from the present joints can answer on another branch of the arm; a servo step that would
+    move a joint farther than SERVO_JOINT_STEP holds the previous target instead (Solar Panel, seed 64005 in orbit:
+    the arm whipped round and flung the panel away)."""
+    from mani_skill_space.oracles.base import SERVO_JOINT_STEP
+
+    oracle = inserter.oracle
+    here = oracle.arm_qpos()
+    offsets = [0.05, SERVO_JOINT_STEP + 0.2, SERVO_JOINT_STEP - 0.01]
+    answers = iter([here + np.r_[0.0, 0.0, offset, 0.0, 0.0, 0.0, 0.0] for offset in offsets])
+    monkeypatch.setattr(oracle.solver.planner, "IK", lambda *args, **kwargs: ("Success", [np.r_[next(answers), 0.04, 0.04]]))
+    commands = [command[:-1] for command in oracle.servo(lambda step: oracle.tcp_pose(), 3, "servo")]
+    np.testing.assert_allclose([command[2] - here[2] for command in commands], [0.05, 0.05, SERVO_JOINT_STEP - 0.01], atol=1e-6)
+
+
 def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):
     """mplib's screw motion drifts off its goal by its first-order steps: at its default step a 10 cm push ends
     millimetres off; the insertion oracles step finely enough that it ends within a millimetre (the holes are 1 mm

@@ -41,6 +41,11 @@ FINE_SCREW_STEP = 0.02
 """rad: a finer joint step for mplib's screw motions (``Oracle.screw_step``). mplib follows the screw with first-order
 (Jacobian) steps of that size and never corrects their drift: at its default, 0.1, 39 of the 98 screw motions of the
 traced Peg-in-Hole episodes ended 5-11 mm from their goal; at 0.02 none did."""
+SERVO_JOINT_STEP = 0.3
+"""rad: the most a servo step moves any joint's target (6 rad/s at 20 Hz, over twice the Panda's joint speed limits).
+Near a joint limit, IK from the present joints can return a solution on another branch (seed 64005 of Solar Panel
+Assembly, orbit: joint 3 from -2.8 to +2.8 rad in one step of the panel's lift), and the arm whipped round to it and
+flung the panel away."""
 JOINT_VELOCITY_LIMIT = 2.0
 JOINT_ACCELERATION_LIMIT = 4.0
 """rad/s and rad/s^2 for every arm joint: about 0.9x the Panda's velocity limits (ManiSkill's solutions use 0.9
@@ -352,7 +357,8 @@ class Oracle(Policy):
     def servo(self, target: Callable[[int], sapien.Pose], steps: int, what: str) -> Iterator[np.ndarray]:
         """Closed-loop Cartesian servo: at every step, the TCP pose ``target(step)`` (recomputed from the scene as
         it is now), solved by IK from the current joints and sent as the joint target. Where a step's pose has no
-        solution (e.g. pressing past a stop) the previous target is held."""
+        solution (e.g. pressing past a stop), or whose solution is on another branch of the arm's inverse kinematics
+        (a joint more than ``SERVO_JOINT_STEP`` away), the previous target is held."""
         self.phase = what
         planner = self.solver.planner
         command = self.hold_action()
@@ -360,9 +366,10 @@ class Oracle(Policy):
             self._plan_from_the_base_now()
             self._plan_with_the_fingers_now()
             goal = self.solver.base_pose.inv() * target(step)
-            status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(self.arm_qpos()), n_init_qpos=1)
-            if status == "Success":
-                command = np.hstack([solutions[0][: len(self.arm_qpos())], self.gripper]).astype(np.float32)
+            now = self.arm_qpos()
+            status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(now), n_init_qpos=1)
+            if status == "Success" and np.abs(solutions[0][: len(now)] - now).max() <= SERVO_JOINT_STEP:
+                command = np.hstack([solutions[0][: len(now)], self.gripper]).astype(np.float32)
             yield command
 
     def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
