@@ -13,7 +13,7 @@ import torch
 from mplib.pymp.collision_detection import fcl
 
 from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT, tumbling_rotations
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, JOINT_ACCELERATION_LIMIT, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
 
 EARLIEST_MEETING = 0.8
 TIME_STEP = 0.1
@@ -51,9 +51,11 @@ OPEN_FINGER_GAP = 0.04
 """Half the gap (m) between the open fingers' pads."""
 BRAKE_STEPS = 12
 HOLD_STEPS = 60
-FAST_SWING = 1.875
-"""Acceleration scale of the swing to a meeting that the usual swing cannot reach in time: 7.5 rad/s^2 on every joint
-(``base.JOINT_ACCELERATION_LIMIT`` is 4), the lowest of the Panda's own joint limits (7.5-20 rad/s^2, joint 2's)."""
+PANDA_LOWEST_JOINT_ACCELERATION = 7.5
+"""rad/s^2: the lowest of the Panda's own joint acceleration limits (7.5-20 rad/s^2, joint 2's)."""
+FAST_SWING = PANDA_LOWEST_JOINT_ACCELERATION / JOINT_ACCELERATION_LIMIT
+"""Acceleration scale (1.875) of the swing to a meeting that the usual swing cannot reach in time: every joint at the
+Panda's lowest joint acceleration limit instead of the oracles' usual ``base.JOINT_ACCELERATION_LIMIT``."""
 
 
 DEBRIS_BALL = "debris_ball"
