@@ -4,6 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import sapien
+from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
@@ -392,6 +393,23 @@ def test_a_servo_step_never_jumps_to_another_branch_of_the_arm(inserter, monkeyp
     monkeypatch.setattr(oracle.solver.planner, "IK", lambda *args, **kwargs: ("Success", [np.r_[next(answers), 0.04, 0.04]]))
     commands = [command[:-1] for command in oracle.servo(lambda step: oracle.tcp_pose(), 3, "servo")]
     np.testing.assert_allclose([command[2] - here[2] for command in commands], [0.05, 0.05, SERVO_JOINT_STEP - 0.01], atol=1e-6)
+
+
+def test_a_box_held_in_the_hand_is_checked_where_the_arm_carries_it(inserter):
+    """The Solar Panel oracle's swing checks the panel in the hand (as a box) against the obstacle points along the
+    way: a point the box passes through halfway round a turn of the arm's first joint blocks that turn and not the
+    turn the other way; the box is where the simulated hand is (the arm's base stands above the origin here)."""
+    oracle = inserter.oracle
+    start = oracle.arm_qpos()
+    hand, base = inserter.oracle.env.agent.tcp.pose.sp.p, oracle.solver.base_pose.p
+    assert base[2] > 0.1
+    halfway_round = base + Rotation.from_rotvec([0.0, 0.0, 0.5]).apply(hand - base) + [0.0, 0.0, 0.05]
+    turned = lambda angle: start + np.r_[angle, np.zeros(len(start) - 1)]  # noqa: E731
+    box, small, large = np.eye(4), np.full(3, 0.03), np.full(3, 0.08)
+    with oracle.obstacles_only(lambda points: halfway_round[None]):
+        assert not oracle.path_keeps_held_box_clear(start, turned(1.0), box, large)
+        assert oracle.path_keeps_held_box_clear(start, turned(1.0), box, small)
+        assert oracle.path_keeps_held_box_clear(start, turned(-1.0), box, large)
 
 
 def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):

@@ -341,16 +341,35 @@ class Oracle(Policy):
         limits = np.asarray(self.solver.planner.joint_limits)[: len(qpos)]
         return float(np.min(np.minimum(qpos - limits[:, 0], limits[:, 1] - qpos)))
 
+    def _path_samples(self, start: np.ndarray, goal: np.ndarray, samples: int) -> int:
+        """How many points of a straight joint move to check: ``samples``, or one every ``path_check_step`` rad."""
+        if self.path_check_step is None:
+            return samples
+        return max(samples, int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / self.path_check_step)) + 1)
+
     def path_is_free(self, start: np.ndarray, goal: np.ndarray, samples: int = 20) -> bool:
-        if self.path_check_step is not None:
-            steps = int(np.ceil(np.abs(np.asarray(goal) - np.asarray(start)).max() / self.path_check_step))
-            samples = max(samples, steps + 1)
+        samples = self._path_samples(start, goal, samples)
         self._plan_with_the_fingers_now()
         planner = self.solver.planner
         for t in np.linspace(0.0, 1.0, samples):
             qpos = planner.pad_qpos(start + t * (goal - start))
             collides = planner.check_for_env_collision(planner.robot, qpos, with_point_cloud=self.solver.use_point_cloud)
             if collides or planner.check_for_self_collision(planner.robot, qpos):
+                return False
+        return True
+
+    def path_keeps_held_box_clear(self, start: np.ndarray, goal: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray, samples: int = 20) -> bool:
+        """Whether a box held in the hand (its 4x4 pose in the TCP frame and its half extents) stays clear of the
+        planner's obstacle points along the straight joint move from ``start`` to ``goal``. (mplib's attached objects
+        would do this, but mplib 0.1.1 places them as if the arm's base stood at the origin.)"""
+        joint_positions = [start + t * (goal - start) for t in np.linspace(0.0, 1.0, self._path_samples(start, goal, samples))]
+        obstacles = self._obstacles_in_use
+        for position, rotation in zip(*self._tcp_poses(joint_positions)):
+            box = np.eye(4)
+            box[:3, :3], box[:3, 3] = rotation.as_matrix(), position
+            box = box @ box_in_tcp
+            in_box_frame = (obstacles - box[:3, 3]) @ box[:3, :3]
+            if np.all(np.abs(in_box_frame) <= half_extents, axis=1).any():
                 return False
         return True
 

@@ -49,6 +49,8 @@ SWING_GAPS = (0.2, 0.12, PLACE_GAP)
 """The panel is swung round to this far above its seat (the first the arm reaches), then goes straight down to
 PLACE_GAP: the planner does not see the panel in the hand, and a swing that ends low would sweep it through the
 pegs' tops."""
+HELD_PANEL_MARGIN = 0.02
+"""How far (m) the panel's swing round keeps its bounding box from the pegs standing, the posts and the mount."""
 PLACE_STEP = 0.004
 PLACE_PRESS = 0.004
 
@@ -142,12 +144,24 @@ class SolarPanelOracle(Oracle):
         """An arm configuration holding the panel high above its seat (SWING_GAPS, either way round), reached by
         a straight joint move."""
         start = self.arm_qpos()
+        panel_in_tcp, half_extents = self._held_panel_box(env)
         for gap in SWING_GAPS:
             for half_turns in (0, 1):
                 for arm in self.ik_solutions(self._tcp_for_seat(env, gap, half_turns)):
-                    if self.path_is_free(start, arm):
+                    if self.path_is_free(start, arm) and self.path_keeps_held_box_clear(start, arm, panel_in_tcp, half_extents):
                         return arm
         raise PlanningFailed("no arm configuration holds the panel over its target")
+
+    def _held_panel_box(self, env) -> tuple[np.ndarray, np.ndarray]:
+        """The panel's bounding box (of its collision parts, grown by HELD_PANEL_MARGIN) as the hand holds it now: its
+        pose in the TCP frame and its half extents. The planner knows nothing of the panel, and a joint-space swing
+        that dips it sweeps it through the pegs' tops."""
+        points = surface_points(env.panel_assets[0])
+        low, high = points.min(axis=0), points.max(axis=0)
+        box_in_panel = np.eye(4)
+        box_in_panel[:3, 3] = (low + high) / 2
+        panel_in_tcp = np.linalg.inv(self.tcp_pose().to_transformation_matrix()) @ env.panel.pose.sp.to_transformation_matrix()
+        return panel_in_tcp @ box_in_panel, (high - low) / 2 + HELD_PANEL_MARGIN
 
     def _tcp_for_seat(self, env, height: float, half_turns: int = None) -> sapien.Pose:
         """The TCP pose that puts the panel's seat ``height`` above its target, given how the hand holds the panel
