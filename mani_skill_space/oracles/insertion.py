@@ -262,27 +262,31 @@ class PegInserter:
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
         candidates = list(self._grasp_candidates(target, tip, peg_points))
-        # all the checked grasps together, then each unchecked last resort on its own
-        groups = [[c for c in candidates if c[1]]] + [[c] for c in candidates if not c[1]]
-        for group in groups:
-            plan = _clear_else_first(self._feasible_plans(target, tip, start, outward, peg_points, group), self.push_joint_margin)
+        # all the checked grasps together (those lifting the peg straight up first), then each unchecked last resort
+        # on its own
+        checked = [c for c in candidates if c[1]]
+        groups = [(checked, True), (checked, False)] + [([c], False) for c in candidates if not c[1]]
+        for group, straight_lift in groups:
+            plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift)
+            plan = _clear_else_first(plans, self.push_joint_margin)
             if plan is not None:
                 self.planned_arm, grasp, twist = plan
                 return grasp, twist
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
     def _feasible_plans(
-        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list
+        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list, straight_lift: bool = False
     ) -> Iterator[tuple[tuple[np.ndarray, sapien.Pose, float], float]]:
         """For each of ``candidates`` (grasp, whether its fingers are checked) in turn and each twist over the hole
         (the hand pointing down and away from the arm first), the plans (arm over the hole, grasp, twist) for
-        which the whole insertion is feasible from ``start``, each with its push's joint-limit margin."""
+        which the whole insertion is feasible from ``start`` (with ``straight_lift``, only those whose lift is a
+        straight screw motion up), each with its push's joint-limit margin."""
         bottom, depth = target.bottom, target.depth
         for grasp, checked in candidates:
             if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
             with self._reaching():
-                lifted = self._grasp_and_lift_end(start, grasp)
+                lifted = self._grasp_and_lift_end(start, grasp, straight_lift)
             if lifted is None:
                 continue
             tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
@@ -330,14 +334,19 @@ class PegInserter:
                 return False
         return True
 
-    def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose) -> Optional[np.ndarray]:
-        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail."""
-        arm = start
-        for pose in (backed_off(grasp, PRE_GRASP_DISTANCE), grasp, at_height(grasp, self.settings.lift_height)):
-            arm = self.oracle.motion_end(arm, pose)
-            if arm is None:
-                return None
-        return arm
+    def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose, straight_lift: bool = False) -> Optional[np.ndarray]:
+        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail (or, with
+        ``straight_lift``, if the lift is not a straight screw motion up: where there is none, the lift is a joint-space
+        move to another configuration of the arm, which can whirl the peg out of the fingers)."""
+        arm = self.oracle.motion_end(start, backed_off(grasp, PRE_GRASP_DISTANCE))
+        arm = None if arm is None else self.oracle.motion_end(arm, grasp)
+        if arm is None:
+            return None
+        lift = at_height(grasp, self.settings.lift_height)
+        if straight_lift:
+            path = self.oracle._screw_path(arm, lift)
+            return None if path is None else path[-1][: len(arm)]
+        return self.oracle.motion_end(arm, lift)
 
     def _line_up(self, target: PegTarget, end: int, twist: float) -> tuple[np.ndarray, float]:
         """An arm configuration over the hole, and its twist, given how the hand really holds the peg now (not
