@@ -401,7 +401,7 @@ def test_a_box_held_in_the_hand_is_checked_where_the_arm_carries_it(inserter):
     turn the other way; the box is where the simulated hand is (the arm's base stands above the origin here)."""
     oracle = inserter.oracle
     start = oracle.arm_qpos()
-    hand, base = inserter.oracle.env.agent.tcp.pose.sp.p, oracle.solver.base_pose.p
+    hand, base = oracle.env.agent.tcp.pose.sp.p, oracle.solver.base_pose.p
     assert base[2] > 0.1
     halfway_round = base + Rotation.from_rotvec([0.0, 0.0, 0.5]).apply(hand - base) + [0.0, 0.0, 0.05]
     turned = lambda angle: start + np.r_[angle, np.zeros(len(start) - 1)]  # noqa: E731

@@ -233,8 +233,13 @@ class Oracle(Policy):
     def motion_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its joint move), or
         None if it would fail: for checking a whole plan before moving."""
+        end = self.screw_end(start, pose)
+        return end if end is not None else self._free_joint_goal(start, pose)
+
+    def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
         positions = self._screw_path(start, pose)
-        return positions[-1] if positions is not None else self._free_joint_goal(start, pose)
+        return None if positions is None else positions[-1][: len(start)]
 
     def joint_move(self, goal: np.ndarray, what: str, acceleration: float = 1.0) -> Iterator[np.ndarray]:
         """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised (at ``acceleration``

@@ -343,10 +343,7 @@ class PegInserter:
         if arm is None:
             return None
         lift = at_height(grasp, self.settings.lift_height)
-        if straight_lift:
-            path = self.oracle._screw_path(arm, lift)
-            return None if path is None else path[-1][: len(arm)]
-        return self.oracle.motion_end(arm, lift)
+        return self.oracle.screw_end(arm, lift) if straight_lift else self.oracle.motion_end(arm, lift)
 
     def _line_up(self, target: PegTarget, end: int, twist: float) -> tuple[np.ndarray, float]:
         """An arm configuration over the hole, and its twist, given how the hand really holds the peg now (not
