@@ -217,12 +217,12 @@ class Oracle(Policy):
 
     def _joint_path(self, pose: sapien.Pose, what: str) -> np.ndarray:
         start = self.arm_qpos()
-        goal = self._free_joint_goal(start, pose)
+        goal = self.free_joint_goal(start, pose)
         if goal is None:
             raise PlanningFailed(f"no motion to the {what} pose")
         return self._timed_path(start, goal)
 
-    def _free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+    def free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """The IK solution for ``pose`` nearest ``start`` that a straight joint move from ``start`` reaches
         without collision, if any."""
         for goal in self.ik_solutions(pose, near=start):
@@ -234,7 +234,7 @@ class Oracle(Policy):
         """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its joint move), or
         None if it would fail: for checking a whole plan before moving."""
         end = self.screw_end(start, pose)
-        return end if end is not None else self._free_joint_goal(start, pose)
+        return end if end is not None else self.free_joint_goal(start, pose)
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
@@ -367,9 +367,8 @@ class Oracle(Policy):
         """Whether a box held in the hand (its 4x4 pose in the TCP frame and its half extents) stays clear of the
         planner's obstacle points along the straight joint move from ``start`` to ``goal``. (mplib's attached objects
         would do this, but mplib 0.1.1 places them as if the arm's base stood at the origin.)"""
-        joint_positions = [start + t * (goal - start) for t in np.linspace(0.0, 1.0, self._path_samples(start, goal, samples))]
         obstacles = self._obstacles_in_use
-        for position, rotation in zip(*self._tcp_poses(joint_positions)):
+        for position, rotation in zip(*self.tcp_path(start, goal, self._path_samples(start, goal, samples))):
             box = np.eye(4)
             box[:3, :3], box[:3, 3] = rotation.as_matrix(), position
             box = box @ box_in_tcp

@@ -262,10 +262,10 @@ class PegInserter:
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
         candidates = list(self._grasp_candidates(target, tip, peg_points))
-        # all the checked grasps together (those lifting the peg straight up first), then each unchecked last resort
-        # on its own
+        # all the checked grasps together (those lifting the peg straight up first, then the others), then each
+        # unchecked last resort on its own
         checked = [c for c in candidates if c[1]]
-        groups = [(checked, True), (checked, False)] + [([c], False) for c in candidates if not c[1]]
+        groups = [(checked, True), (checked, False)] + [([c], None) for c in candidates if not c[1]]
         for group, straight_lift in groups:
             plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift)
             plan = _clear_else_first(plans, self.push_joint_margin)
@@ -275,12 +275,12 @@ class PegInserter:
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
     def _feasible_plans(
-        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list, straight_lift: bool = False
+        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list, straight_lift: Optional[bool] = None
     ) -> Iterator[tuple[tuple[np.ndarray, sapien.Pose, float], float]]:
         """For each of ``candidates`` (grasp, whether its fingers are checked) in turn and each twist over the hole
         (the hand pointing down and away from the arm first), the plans (arm over the hole, grasp, twist) for
-        which the whole insertion is feasible from ``start`` (with ``straight_lift``, only those whose lift is a
-        straight screw motion up), each with its push's joint-limit margin."""
+        which the whole insertion is feasible from ``start`` (only those whose lift is, or with False is not, a
+        straight screw motion up, as ``straight_lift`` says), each with its push's joint-limit margin."""
         bottom, depth = target.bottom, target.depth
         for grasp, checked in candidates:
             if checked and not self._fingers_meet_sides(grasp, peg_points):
@@ -334,16 +334,20 @@ class PegInserter:
                 return False
         return True
 
-    def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose, straight_lift: bool = False) -> Optional[np.ndarray]:
-        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail (or, with
-        ``straight_lift``, if the lift is not a straight screw motion up: where there is none, the lift is a joint-space
-        move to another configuration of the arm, which can whirl the peg out of the fingers)."""
+    def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose, straight_lift: Optional[bool] = None) -> Optional[np.ndarray]:
+        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail, or if the
+        lift is not (``straight_lift`` True) or is (False) a straight screw motion up. Where there is none, the lift is
+        a joint-space move to another configuration of the arm, which can whirl the peg out of the fingers; a grasp
+        whose lift is straight was already planned with the straight ones, so False leaves it out."""
         arm = self.oracle.motion_end(start, backed_off(grasp, PRE_GRASP_DISTANCE))
         arm = None if arm is None else self.oracle.motion_end(arm, grasp)
         if arm is None:
             return None
         lift = at_height(grasp, self.settings.lift_height)
-        return self.oracle.screw_end(arm, lift) if straight_lift else self.oracle.motion_end(arm, lift)
+        straight = self.oracle.screw_end(arm, lift)
+        if straight_lift is None or straight_lift == (straight is not None):
+            return straight if straight is not None else self.oracle.free_joint_goal(arm, lift)
+        return None
 
     def _line_up(self, target: PegTarget, end: int, twist: float) -> tuple[np.ndarray, float]:
         """An arm configuration over the hole, and its twist, given how the hand really holds the peg now (not

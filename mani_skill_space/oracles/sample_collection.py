@@ -53,7 +53,7 @@ class SampleCollectionOracle(Oracle):
         grasp = sapien.Pose([grasp.p[0], grasp.p[1], max(grasp.p[2], 0.012)], grasp.q)
         pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
         if swing_to_grasp:
-            goal = self._free_joint_goal(self.arm_qpos(), pre_grasp)
+            goal = self.free_joint_goal(self.arm_qpos(), pre_grasp)
             if goal is None:
                 raise PlanningFailed("no swing to the pre-grasp pose")
             yield from self.joint_move(goal, "pre-grasp")
