@@ -11,6 +11,7 @@ checkpoint:PATH``.
 
 from __future__ import annotations
 
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +35,6 @@ from mani_skill_space.learning import (
     set_learning_rate,
     task_of_demonstrations,
 )
-from mani_skill_space.rollout import evaluate_policy
 
 
 @dataclass
@@ -65,27 +65,32 @@ class Args:
     eval_every: int = 5000
     eval_episodes: int = 10
     eval_seed_start: int = 10_000
+    keep_snapshots: bool = False
+    """Also keep the checkpoint of every evaluation point as ``snapshot-<iteration>.pt``, to select among them
+    afterwards (e.g. after training with ``--eval-episodes 0`` on a machine without the simulator)."""
+    device: str = "auto"
+    """``auto``: CUDA where torch finds it, else the CPU. Checkpoints are saved with CPU tensors either way."""
     output_dir: Path = Path("runs")
     name: Optional[str] = None
     seed: int = 0
 
 
-def chunk_indices(lengths: list[int]) -> np.ndarray:
-    """(episode, start step) of every training sample: observations up to the start step, actions from it;
-    windows reaching past an episode's ends are padded with its first observation / last action."""
-    return np.array([(e, t) for e, length in enumerate(lengths) for t in range(length)])
-
-
-def gather(episodes, index: np.ndarray, obs_horizon: int, action_horizon: int) -> tuple[torch.Tensor, torch.Tensor]:
+def chunk_windows(episodes, obs_horizon: int, action_horizon: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every training sample, one per (episode, start step): the observations up to the start step and the actions
+    from it; windows reaching past an episode's ends are padded with its first observation / last action."""
     obs, actions = [], []
-    for e, t in index:
-        episode = episodes[e]
+    for episode in episodes:
         length = len(episode["actions"])
-        obs_steps = np.clip(np.arange(t - obs_horizon + 1, t + 1), 0, length)
-        action_steps = np.clip(np.arange(t, t + action_horizon), 0, length - 1)
-        obs.append(episode["obs"][obs_steps])
-        actions.append(episode["actions"][action_steps])
-    return torch.as_tensor(np.stack(obs)), torch.as_tensor(np.stack(actions))
+        starts = np.arange(length)[:, None]
+        obs.append(episode["obs"][np.clip(starts + np.arange(1 - obs_horizon, 1), 0, length)])
+        actions.append(episode["actions"][np.clip(starts + np.arange(action_horizon), 0, length - 1)])
+    return torch.as_tensor(np.concatenate(obs)), torch.as_tensor(np.concatenate(actions))
+
+
+def evaluate(policy, env_id: str, env_kwargs: dict, seeds) -> dict[str, float]:
+    from mani_skill_space.rollout import evaluate_policy  # the simulator only where training evaluates
+
+    return evaluate_policy(policy, env_id, env_kwargs, seeds)
 
 
 def main(args: Args) -> Path:
@@ -93,14 +98,16 @@ def main(args: Args) -> Path:
     rng = np.random.default_rng(args.seed)
     episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
     env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
+    device = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device)
     all_obs = np.concatenate([e["obs"] for e in episodes])
-    index = chunk_indices([len(e["actions"]) for e in episodes])
+    sample_obs, sample_actions = (x.to(device) for x in chunk_windows(episodes, args.obs_horizon, args.action_horizon))
     model_kwargs = dict(
         state_dim=all_obs.shape[1], action_dim=episodes[0]["actions"].shape[1], obs_horizon=args.obs_horizon, action_horizon=args.action_horizon, hidden=args.hidden
     )
     model = DiffusionNoisePredictor(**model_kwargs)
     model.obs_mean.copy_(torch.as_tensor(all_obs.mean(0)))
     model.obs_std.copy_(torch.as_tensor(all_obs.std(0)).clamp_min(1e-3))
+    model.to(device)
     scheduler_config = dict(num_train_timesteps=args.diffusion_steps, beta_schedule="squaredcos_cap_v2", clip_sample=True, prediction_type="epsilon")
     scheduler = DDPMScheduler(**scheduler_config)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-6)
@@ -121,17 +128,18 @@ def main(args: Args) -> Path:
         if ema is not None:
             ema.restore(model.parameters())
 
-    print(f"{len(episodes)} demonstrations, {len(index)} samples of {env_id} {env_kwargs}; training in {run_dir}")
+    print(f"{len(episodes)} demonstrations, {len(sample_obs)} samples of {env_id} {env_kwargs} on {device}; training in {run_dir}")
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     start = time.time()
     progress = tqdm(range(1, args.max_iterations + 1), desc="diffusion")
     for iteration in progress:
         model.train()
-        obs, actions = gather(episodes, index[rng.integers(0, len(index), args.batch_size)], args.obs_horizon, args.action_horizon)
+        batch = torch.as_tensor(rng.integers(0, len(sample_obs), args.batch_size), device=device)
+        obs, actions = sample_obs[batch], sample_actions[batch]
         if args.obs_noise:
             obs = obs + args.obs_noise * model.obs_std * torch.randn_like(obs)
         noise = torch.randn_like(actions)
-        steps = torch.randint(0, scheduler.config.num_train_timesteps, (len(actions),))
+        steps = torch.randint(0, scheduler.config.num_train_timesteps, (len(actions),), device=device)
         noisy = scheduler.add_noise(actions, noise, steps)
         loss = torch.nn.functional.mse_loss(model(noisy, steps, obs), noise)
         set_learning_rate(optimiser, args, iteration, (time.time() - start) / 60)
@@ -148,7 +156,9 @@ def main(args: Args) -> Path:
         if iteration % args.eval_every == 0 or out_of_time:
             model.eval()
             save()
-            metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
+            if args.keep_snapshots:
+                shutil.copyfile(checkpoint, run_dir / f"snapshot-{iteration}.pt")
+            metrics = evaluate(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
             curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
             progress.write(f"iteration {iteration}: {metrics}" + (" (best so far)" if metrics and best.update(metrics) else ""))
         if out_of_time:

@@ -130,10 +130,24 @@ def test_an_unknown_learning_rate_schedule_names_the_valid_ones():
 
 def test_diffusion_policy(demos, tmp_path):
     dp = _baseline("diffusion_policy")
-    checkpoint = dp.main(dp.Args(demos=demos, max_iterations=60, eval_every=60, eval_episodes=0, batch_size=32, diffusion_steps=10, output_dir=tmp_path, name="dp"))
+    args = dp.Args(demos=demos, max_iterations=60, eval_every=30, eval_episodes=0, batch_size=32, diffusion_steps=10, keep_snapshots=True, output_dir=tmp_path, name="dp")
+    checkpoint = dp.main(args)
     _curve(tmp_path / "dp")
     assert torch.load(checkpoint, weights_only=False)["diffusion"]["inference_steps"] == 10
+    assert sorted(p.name for p in (tmp_path / "dp").glob("snapshot-*.pt")) == ["snapshot-30.pt", "snapshot-60.pt"]
+    assert torch.equal(torch.load(tmp_path / "dp" / "snapshot-60.pt", weights_only=True)["state_dict"]["net.0.weight"],
+                       torch.load(checkpoint, weights_only=True)["state_dict"]["net.0.weight"])
     _score(checkpoint, tmp_path)
+
+
+def test_the_diffusion_policy_samples_observation_windows_and_action_chunks_padded_at_the_episode_ends():
+    dp = _baseline("diffusion_policy")
+    episode = {"obs": np.arange(4, dtype=np.float32)[:, None], "actions": 10 + np.arange(3, dtype=np.float32)[:, None]}  # 3 steps
+    obs, actions = dp.chunk_windows([episode, episode], obs_horizon=2, action_horizon=3)
+    assert obs.shape == (6, 2, 1) and actions.shape == (6, 3, 1)
+    assert obs[:3, :, 0].tolist() == [[0, 0], [0, 1], [1, 2]]  # the first observation repeated before the start
+    assert actions[:3, :, 0].tolist() == [[10, 11, 12], [11, 12, 12], [12, 12, 12]]  # the last action repeated after the end
+    assert torch.equal(obs[3:], obs[:3]) and torch.equal(actions[3:], actions[:3])
 
 
 def test_diffusion_policy_saves_the_moving_average_of_its_weights_with_ema(demos, tmp_path):
