@@ -111,3 +111,13 @@ def test_table_has_a_stage_column_only_for_staged_tasks():
     staged = evaluation.markdown_table({"suite": "s", "rows": [row(None), row(3)]}).splitlines()
     assert staged[2].endswith("| stage |")
     assert staged[-2].endswith("| - |") and staged[-1].endswith("| 3.00 |")
+
+
+def test_each_evaluation_worker_takes_its_share_of_the_cores(monkeypatch):
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    monkeypatch.setattr(evaluation.os, "cpu_count", lambda: 8)
+    assert [evaluation.worker_torch_threads(n) for n in (1, 2, 3, 8, 16)] == [8, 4, 2, 1, 1]
+    with ProcessPoolExecutor(1, mp_context=get_context("spawn"), initializer=evaluation.limit_torch_threads, initargs=(1,)) as pool:
+        assert pool.submit(torch.get_num_threads).result() == 1
