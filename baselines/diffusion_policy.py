@@ -15,7 +15,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from mani_skill_space.learning import (
     BestCheckpoint,
     CheckpointPolicy,
     DiffusionNoisePredictor,
+    DiffusionUnetNoisePredictor,
     LearningCurve,
     LrSchedule,
     load_demonstrations,
@@ -61,6 +62,10 @@ class Args:
     obs_noise: float = 0.0
     """Gaussian noise (in units of each observation's standard deviation) added to the observations the chunks
     are conditioned on in training, as ``bc.py``'s ``--obs-noise``."""
+    denoiser: Literal["mlp", "unet"] = "mlp"
+    """``mlp``: an MLP over the flattened chunk (``DiffusionNoisePredictor``, ``--hidden`` wide); ``unet``: Chi et al.'s
+    1-D UNet over the chunk's time axis, FiLM-conditioned (``DiffusionUnetNoisePredictor``, as ManiSkill's baseline;
+    ``--action-horizon`` a multiple of 4)."""
     hidden: int = 512
     eval_every: int = 5000
     eval_episodes: int = 10
@@ -101,10 +106,10 @@ def main(args: Args) -> Path:
     device = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device)
     all_obs = np.concatenate([e["obs"] for e in episodes])
     sample_obs, sample_actions = (x.to(device) for x in chunk_windows(episodes, args.obs_horizon, args.action_horizon))
-    model_kwargs = dict(
-        state_dim=all_obs.shape[1], action_dim=episodes[0]["actions"].shape[1], obs_horizon=args.obs_horizon, action_horizon=args.action_horizon, hidden=args.hidden
-    )
-    model = DiffusionNoisePredictor(**model_kwargs)
+    model_kwargs = dict(state_dim=all_obs.shape[1], action_dim=episodes[0]["actions"].shape[1], obs_horizon=args.obs_horizon, action_horizon=args.action_horizon)
+    if args.denoiser == "mlp":
+        model_kwargs["hidden"] = args.hidden
+    model = (DiffusionNoisePredictor if args.denoiser == "mlp" else DiffusionUnetNoisePredictor)(**model_kwargs)
     model.obs_mean.copy_(torch.as_tensor(all_obs.mean(0)))
     model.obs_std.copy_(torch.as_tensor(all_obs.std(0)).clamp_min(1e-3))
     model.to(device)

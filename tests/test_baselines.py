@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from mani_skill_space import eval as evaluation
-from mani_skill_space.learning import BestCheckpoint, CheckpointPolicy, load_demonstrations, set_learning_rate
+from mani_skill_space.learning import BestCheckpoint, CheckpointPolicy, DiffusionUnetNoisePredictor, load_demonstrations, set_learning_rate
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_KWARGS = {"domain": "mars", "asset_source": "dataset"}
@@ -128,16 +128,33 @@ def test_an_unknown_learning_rate_schedule_names_the_valid_ones():
         set_learning_rate(torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=args.lr), args, 0, 0.0)
 
 
-def test_diffusion_policy(demos, tmp_path):
+@pytest.mark.parametrize("denoiser", ["mlp", "unet"])
+def test_diffusion_policy(denoiser, demos, tmp_path):
     dp = _baseline("diffusion_policy")
-    args = dp.Args(demos=demos, max_iterations=60, eval_every=30, eval_episodes=0, batch_size=32, diffusion_steps=10, keep_snapshots=True, output_dir=tmp_path, name="dp")
+    args = dp.Args(demos=demos, max_iterations=60, eval_every=30, eval_episodes=0, batch_size=32, diffusion_steps=10, keep_snapshots=True, denoiser=denoiser, output_dir=tmp_path, name="dp")
     checkpoint = dp.main(args)
     _curve(tmp_path / "dp")
-    assert torch.load(checkpoint, weights_only=False)["diffusion"]["inference_steps"] == 10
+    saved = torch.load(checkpoint, weights_only=True)
+    assert saved["diffusion"]["inference_steps"] == 10
+    assert saved["model_class"] == {"mlp": "DiffusionNoisePredictor", "unet": "DiffusionUnetNoisePredictor"}[denoiser]
     assert sorted(p.name for p in (tmp_path / "dp").glob("snapshot-*.pt")) == ["snapshot-30.pt", "snapshot-60.pt"]
-    assert torch.equal(torch.load(tmp_path / "dp" / "snapshot-60.pt", weights_only=True)["state_dict"]["net.0.weight"],
-                       torch.load(checkpoint, weights_only=True)["state_dict"]["net.0.weight"])
+    snapshot = torch.load(tmp_path / "dp" / "snapshot-60.pt", weights_only=True)["state_dict"]
+    assert snapshot.keys() == saved["state_dict"].keys() and all(torch.equal(snapshot[k], saved["state_dict"][k]) for k in snapshot)
     _score(checkpoint, tmp_path)
+
+
+def test_the_unet_denoiser_predicts_a_chunk_per_sample_conditioned_on_its_own_step_and_history():
+    unet = DiffusionUnetNoisePredictor(state_dim=5, action_dim=3, obs_horizon=2, action_horizon=8).eval()
+    chunks, steps, history = torch.randn(4, 8, 3), torch.tensor([0, 10, 50, 99]), torch.randn(4, 2, 5)
+    noise = unet(chunks, steps, history)
+    assert noise.shape == (4, 8, 3)
+    alone = torch.cat([unet(chunks[i : i + 1], steps[i : i + 1], history[i : i + 1]) for i in range(4)])
+    assert torch.allclose(noise, alone, atol=1e-5)  # no sample's prediction depends on another's (group norm, not batch norm)
+    assert not torch.allclose(noise[:1], unet(chunks[:1], steps[1:2], history[:1]))  # the step conditions it
+    assert not torch.allclose(noise[:1], unet(chunks[:1], steps[:1], history[1:2]))  # the history conditions it
+    assert unet(chunks[:1], torch.tensor(7), history[:1]).shape == (1, 8, 3)  # one step for the batch, as at inference
+    with pytest.raises(ValueError, match="divisible by 4"):
+        DiffusionUnetNoisePredictor(state_dim=5, action_dim=3, obs_horizon=2, action_horizon=6)
 
 
 def test_the_diffusion_policy_samples_observation_windows_and_action_chunks_padded_at_the_episode_ends():

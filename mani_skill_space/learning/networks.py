@@ -136,19 +136,98 @@ class DiffusionNoisePredictor(nn.Module):
 
     def forward(self, noisy_actions: torch.Tensor, step: torch.Tensor, obs_history: torch.Tensor) -> torch.Tensor:
         n = noisy_actions.shape[0]
-        half = self.step_features // 2
-        frequencies = torch.exp(-np.log(10000.0) * torch.arange(half, device=step.device) / half)
-        angles = step.float().reshape(-1, 1) * frequencies[None]
-        step_embedding = torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
-        conditioning = torch.clamp((obs_history - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP).reshape(n, -1)
-        out = self.net(torch.cat([noisy_actions.reshape(n, -1), conditioning, step_embedding], dim=-1))
+        conditioning = _normalized_history(self, obs_history)
+        out = self.net(torch.cat([noisy_actions.reshape(n, -1), conditioning, step_embedding(step, n, self.step_features)], dim=-1))
         return out.reshape(n, self.action_horizon, self.action_dim)
 
 
-MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianActor, BehaviourCloningPolicy, DiffusionNoisePredictor)}
+def step_embedding(step: torch.Tensor, n: int, features: int) -> torch.Tensor:
+    """(n, features) sinusoidal embedding of the diffusion step (a scalar, or one per sample)."""
+    half = features // 2
+    frequencies = torch.exp(-np.log(10000.0) * torch.arange(half, device=step.device) / half)
+    angles = step.float().reshape(-1, 1) * frequencies[None]
+    return torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
 
 
-def denoise(model: DiffusionNoisePredictor, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
+def _normalized_history(model: nn.Module, obs_history: torch.Tensor) -> torch.Tensor:
+    """(n, obs_horizon * state_dim): the observation history normalized by the model's statistics, clipped."""
+    return torch.clamp((obs_history - model.obs_mean) / model.obs_std, -OBS_CLIP, OBS_CLIP).reshape(obs_history.shape[0], -1)
+
+
+class _ConditionedResidualBlock(nn.Module):
+    """Two 1-D convolutions (group norm, Mish) over the action chunk's time axis, the second's input scaled and
+    shifted by the conditioning (FiLM), with a residual connection."""
+
+    def __init__(self, channels_in: int, channels_out: int, conditioning: int, kernel: int = 5, groups: int = 8):
+        super().__init__()
+        self.first = _convolution(channels_in, channels_out, kernel, groups)
+        self.second = _convolution(channels_out, channels_out, kernel, groups)
+        self.film = nn.Sequential(nn.Mish(), nn.Linear(conditioning, 2 * channels_out))
+        self.residual = nn.Conv1d(channels_in, channels_out, 1) if channels_in != channels_out else nn.Identity()
+
+    def forward(self, x: torch.Tensor, conditioning: torch.Tensor) -> torch.Tensor:
+        scale, shift = self.film(conditioning).unsqueeze(-1).chunk(2, dim=1)
+        return self.second(self.first(x) * scale + shift) + self.residual(x)
+
+
+def _convolution(channels_in: int, channels_out: int, kernel: int, groups: int) -> nn.Sequential:
+    return nn.Sequential(nn.Conv1d(channels_in, channels_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, channels_out), nn.Mish())
+
+
+class DiffusionUnetNoisePredictor(nn.Module):
+    """The diffusion policy's denoiser as Chi et al. (and ManiSkill's diffusion policy baseline) build it: a 1-D
+    UNet over the action chunk's time axis, every residual block conditioned (FiLM) on the diffusion step's
+    embedding and the observation history. ``action_horizon`` must be divisible by 2 ** (len(channels) - 1)."""
+
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, channels: Sequence[int] = (64, 128, 256), step_features: int = 64):
+        super().__init__()
+        if action_horizon % 2 ** (len(channels) - 1):
+            raise ValueError(f"action_horizon {action_horizon} must be divisible by {2 ** (len(channels) - 1)} for {len(channels)} UNet levels")
+        self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
+        self.step_features = step_features
+        conditioning = step_features + state_dim * obs_horizon
+        self.step_mlp = nn.Sequential(nn.Linear(step_features, 4 * step_features), nn.Mish(), nn.Linear(4 * step_features, step_features))
+        widths = [action_dim, *channels]
+        self.down = nn.ModuleList()
+        for level, (width_in, width_out) in enumerate(zip(widths[:-1], widths[1:])):
+            last = level == len(channels) - 1
+            self.down.append(nn.ModuleList([
+                _ConditionedResidualBlock(width_in, width_out, conditioning),
+                _ConditionedResidualBlock(width_out, width_out, conditioning),
+                nn.Identity() if last else nn.Conv1d(width_out, width_out, 3, stride=2, padding=1),
+            ]))
+        self.middle = nn.ModuleList([_ConditionedResidualBlock(channels[-1], channels[-1], conditioning) for _ in range(2)])
+        self.up = nn.ModuleList()
+        for width_in, width_out in reversed(list(zip(channels[:-1], channels[1:]))):
+            self.up.append(nn.ModuleList([
+                _ConditionedResidualBlock(2 * width_out, width_in, conditioning),
+                _ConditionedResidualBlock(width_in, width_in, conditioning),
+                nn.ConvTranspose1d(width_in, width_in, 4, stride=2, padding=1),
+            ]))
+        self.out = nn.Sequential(_convolution(channels[0], channels[0], 5, 8), nn.Conv1d(channels[0], action_dim, 1))
+        self.register_buffer("obs_mean", torch.zeros(state_dim))
+        self.register_buffer("obs_std", torch.ones(state_dim))
+
+    def forward(self, noisy_actions: torch.Tensor, step: torch.Tensor, obs_history: torch.Tensor) -> torch.Tensor:
+        n = noisy_actions.shape[0]
+        conditioning = torch.cat([self.step_mlp(step_embedding(step, n, self.step_features)), _normalized_history(self, obs_history)], dim=-1)
+        x = noisy_actions.transpose(1, 2)  # (n, action_dim, action_horizon): convolve over time
+        skips = []
+        for first, second, downsample in self.down:
+            x = second(first(x, conditioning), conditioning)
+            skips.append(x)
+            x = downsample(x)
+        for block in self.middle:
+            x = block(x, conditioning)
+        for first, second, upsample in self.up:
+            x = upsample(second(first(torch.cat([x, skips.pop()], dim=1), conditioning), conditioning))
+        return self.out(x).transpose(1, 2)
+
+
+MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianActor, BehaviourCloningPolicy, DiffusionNoisePredictor, DiffusionUnetNoisePredictor)}
+
+
+def denoise(model: nn.Module, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
     """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion."""
     actions = torch.randn((obs_history.shape[0], model.action_horizon, model.action_dim), generator=generator, device=obs_history.device)
     scheduler.set_timesteps(inference_steps)
