@@ -116,7 +116,7 @@ class BehaviourCloningPolicy(nn.Module):
         self.register_buffer("obs_std", torch.ones(state_dim))
 
     def forward(self, state: torch.Tensor) -> torch.Tensor:
-        return self.net(torch.clamp((state - self.obs_mean) / self.obs_std, -OBS_CLIP, OBS_CLIP))
+        return self.net(_normalized(self, state))
 
     def act(self, obs) -> torch.Tensor:
         return self(obs["state"])
@@ -136,7 +136,7 @@ class DiffusionNoisePredictor(nn.Module):
 
     def forward(self, noisy_actions: torch.Tensor, step: torch.Tensor, obs_history: torch.Tensor) -> torch.Tensor:
         n = noisy_actions.shape[0]
-        conditioning = _normalized_history(self, obs_history)
+        conditioning = _normalized(self, obs_history).reshape(n, -1)
         out = self.net(torch.cat([noisy_actions.reshape(n, -1), conditioning, step_embedding(step, n, self.step_features)], dim=-1))
         return out.reshape(n, self.action_horizon, self.action_dim)
 
@@ -149,9 +149,10 @@ def step_embedding(step: torch.Tensor, n: int, features: int) -> torch.Tensor:
     return torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
 
 
-def _normalized_history(model: nn.Module, obs_history: torch.Tensor) -> torch.Tensor:
-    """(n, obs_horizon * state_dim): the observation history normalized by the model's statistics, clipped."""
-    return torch.clamp((obs_history - model.obs_mean) / model.obs_std, -OBS_CLIP, OBS_CLIP).reshape(obs_history.shape[0], -1)
+def _normalized(model: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+    """Observations (..., state_dim) normalized by the model's statistics (its ``obs_mean`` and ``obs_std``
+    buffers), clipped to +-OBS_CLIP."""
+    return torch.clamp((obs - model.obs_mean) / model.obs_std, -OBS_CLIP, OBS_CLIP)
 
 
 class _ConditionedResidualBlock(nn.Module):
@@ -210,7 +211,7 @@ class DiffusionUnetNoisePredictor(nn.Module):
 
     def forward(self, noisy_actions: torch.Tensor, step: torch.Tensor, obs_history: torch.Tensor) -> torch.Tensor:
         n = noisy_actions.shape[0]
-        conditioning = torch.cat([self.step_mlp(step_embedding(step, n, self.step_features)), _normalized_history(self, obs_history)], dim=-1)
+        conditioning = torch.cat([self.step_mlp(step_embedding(step, n, self.step_features)), _normalized(self, obs_history).reshape(n, -1)], dim=-1)
         x = noisy_actions.transpose(1, 2)  # (n, action_dim, action_horizon): convolve over time
         skips = []
         for first, second, downsample in self.down:
