@@ -73,6 +73,10 @@ class Args:
     keep_snapshots: bool = False
     """Also keep the checkpoint of every evaluation point as ``snapshot-<iteration>.pt``, to select among them
     afterwards (e.g. after training with ``--eval-episodes 0`` on a machine without the simulator)."""
+    compile: Literal["off", "default", "reduce-overhead"] = "off"
+    """``torch.compile`` the denoiser for training with this mode: ``reduce-overhead`` replays CUDA graphs, which
+    is what a GPU needs for the UNet's many small kernels (otherwise its step is launch-bound: about 40 iterations
+    a second on an H200); ``default`` fuses kernels without graphs. The first iterations pay the compilation."""
     device: str = "auto"
     """``auto``: CUDA where torch finds it, else the CPU. Checkpoints are saved with CPU tensors either way."""
     output_dir: Path = Path("runs")
@@ -113,10 +117,11 @@ def main(args: Args) -> Path:
     model.obs_mean.copy_(torch.as_tensor(all_obs.mean(0)))
     model.obs_std.copy_(torch.as_tensor(all_obs.std(0)).clamp_min(1e-3))
     model.to(device)
+    denoiser = model if args.compile == "off" else torch.compile(model, mode=args.compile)
     scheduler_config = dict(num_train_timesteps=args.diffusion_steps, beta_schedule="squaredcos_cap_v2", clip_sample=True, prediction_type="epsilon")
     scheduler = DDPMScheduler(**scheduler_config)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-6)
-    ema = EMAModel(parameters=model.parameters(), power=0.75) if args.ema else None
+    ema = EMAModel(parameters=model.parameters(), power=0.75, foreach=True) if args.ema else None
     run_dir = args.output_dir / (args.name or f"diffusion-{env_id}-{int(time.time())}")
     curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
     diffusion = dict(
@@ -146,7 +151,7 @@ def main(args: Args) -> Path:
         noise = torch.randn_like(actions)
         steps = torch.randint(0, scheduler.config.num_train_timesteps, (len(actions),), device=device)
         noisy = scheduler.add_noise(actions, noise, steps)
-        loss = torch.nn.functional.mse_loss(model(noisy, steps, obs), noise)
+        loss = torch.nn.functional.mse_loss(denoiser(noisy, steps, obs), noise)
         set_learning_rate(optimiser, args, iteration, (time.time() - start) / 60)
         optimiser.zero_grad()
         loss.backward()

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import math
 from typing import Optional, Sequence
 
-import numpy as np
 import torch
 import torch.nn as nn
 
@@ -144,7 +144,7 @@ class DiffusionNoisePredictor(nn.Module):
 def step_embedding(step: torch.Tensor, n: int, features: int) -> torch.Tensor:
     """(n, features) sinusoidal embedding of the diffusion step (a scalar, or one per sample)."""
     half = features // 2
-    frequencies = torch.exp(-np.log(10000.0) * torch.arange(half, device=step.device) / half)
+    frequencies = torch.exp(-math.log(10000.0) * torch.arange(half, device=step.device) / half)
     angles = step.float().reshape(-1, 1) * frequencies[None]
     return torch.cat([angles.sin(), angles.cos()], dim=-1).expand(n, -1)
 
