@@ -167,6 +167,14 @@ def test_the_diffusion_policy_samples_observation_windows_and_action_chunks_padd
     assert torch.equal(obs[3:], obs[:3]) and torch.equal(actions[3:], actions[:3])
 
 
+def test_diffusion_policy_trains_a_compiled_denoiser_and_saves_the_plain_one(demos, tmp_path):
+    dp = _baseline("diffusion_policy")
+    args = dp.Args(demos=demos, max_iterations=5, eval_every=5, eval_episodes=0, batch_size=8, diffusion_steps=10, hidden=32, output_dir=tmp_path, compile="default", ema=True)
+    path = dp.main(args)
+    assert not any(key.startswith("_orig_mod") for key in torch.load(path, weights_only=True)["state_dict"])
+    assert CheckpointPolicy(str(path)).diffusion is not None  # loads into the plain denoiser
+
+
 def test_diffusion_policy_saves_the_moving_average_of_its_weights_with_ema(demos, tmp_path):
     dp = _baseline("diffusion_policy")
     tiny = dict(demos=demos, max_iterations=30, eval_every=30, eval_episodes=0, batch_size=16, diffusion_steps=10, output_dir=tmp_path, lr_schedule="cosine", obs_noise=0.05)
