@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -141,6 +142,20 @@ def test_diffusion_policy(denoiser, demos, tmp_path):
     snapshot = torch.load(tmp_path / "dp" / "snapshot-60.pt", weights_only=True)["state_dict"]
     assert snapshot.keys() == saved["state_dict"].keys() and all(torch.equal(snapshot[k], saved["state_dict"][k]) for k in snapshot)
     _score(checkpoint, tmp_path)
+
+
+def test_the_diffusion_policy_samples_its_chunks_from_noise_seeded_by_the_episode():
+    policy = CheckpointPolicy(str(Path(__file__).resolve().parents[1] / "baselines" / "checkpoints" / "dp_tubes_dart.pt"))
+    env = SimpleNamespace(unwrapped=SimpleNamespace(spec=SimpleNamespace(id=policy.env_id)))
+    observations = torch.randn(9, 1, policy.model.state_dim, generator=torch.Generator().manual_seed(0))
+
+    def rollout(seed: int, global_seed: int = 0) -> torch.Tensor:
+        policy.reset(env, seed)
+        torch.manual_seed(global_seed)  # the global generator's state must not matter
+        return torch.stack([policy.act(obs) for obs in observations])
+
+    assert torch.equal(rollout(3, global_seed=0), rollout(3, global_seed=1))
+    assert not torch.allclose(rollout(3), rollout(4))
 
 
 def test_the_unet_denoiser_predicts_a_chunk_per_sample_conditioned_on_its_own_step_and_history():

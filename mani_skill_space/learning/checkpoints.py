@@ -73,7 +73,8 @@ def load_model(checkpoint: dict, device: str = "cpu") -> nn.Module:
 
 
 class CheckpointPolicy(Policy):
-    """A trained baseline, deterministic (the mean action, or the diffusion policy's denoised chunk)."""
+    """A trained baseline, deterministic (the mean action, or the diffusion policy's denoised chunk, its noise
+    seeded by the episode's seed)."""
 
     def __init__(self, path: str, device: str = "cpu"):
         self.path = Path(path)
@@ -97,6 +98,8 @@ class CheckpointPolicy(Policy):
             raise ValueError(f"{self.path} was trained on {self.env_id}, not {running}")
         self.history: deque = deque(maxlen=self.diffusion["obs_horizon"] if self.diffusion else 1)
         self.queue: deque = deque()
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        """The diffusion policy's sampling noise, seeded by the episode: the same seed, the same rollout."""
 
     @torch.no_grad()
     def act(self, obs) -> torch.Tensor:
@@ -108,7 +111,7 @@ class CheckpointPolicy(Policy):
             self.history.append(state)
         self.history.append(state)
         if not self.queue:
-            chunk = denoise(self.model, self.scheduler, torch.stack(list(self.history), dim=1), self.diffusion["inference_steps"])
+            chunk = denoise(self.model, self.scheduler, torch.stack(list(self.history), dim=1), self.diffusion["inference_steps"], self.generator)
             self.queue.extend(chunk[:, i] for i in range(self.diffusion["execute_horizon"]))
         return self.queue.popleft()
 

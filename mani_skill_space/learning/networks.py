@@ -229,11 +229,12 @@ MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianAct
 
 
 def denoise(model: nn.Module, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
-    """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion."""
+    """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion; ``generator`` draws
+    the initial noise and every step's noise (the same generator state, the same chunk)."""
     actions = torch.randn((obs_history.shape[0], model.action_horizon, model.action_dim), generator=generator, device=obs_history.device)
     scheduler.set_timesteps(inference_steps)
     for step in scheduler.timesteps:
         noise = model(actions, step.to(obs_history.device), obs_history)
-        actions = scheduler.step(noise, step, actions).prev_sample
+        actions = scheduler.step(noise, step, actions, generator=generator).prev_sample
     return actions.clamp(-1.0, 1.0)
 
