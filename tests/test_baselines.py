@@ -145,7 +145,7 @@ def test_diffusion_policy(denoiser, demos, tmp_path):
 
 
 def test_the_diffusion_policy_samples_its_chunks_from_noise_seeded_by_the_episode():
-    policy = CheckpointPolicy(str(Path(__file__).resolve().parents[1] / "baselines" / "checkpoints" / "dp_tubes_dart.pt"))
+    policy = CheckpointPolicy(str(ROOT / "baselines" / "checkpoints" / "dp_tubes_dart.pt"))
     env = SimpleNamespace(unwrapped=SimpleNamespace(spec=SimpleNamespace(id=policy.env_id)))
     observations = torch.randn(9, 1, policy.model.state_dim, generator=torch.Generator().manual_seed(0))
 
