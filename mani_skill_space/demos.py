@@ -87,11 +87,13 @@ class Args:
     """JSON object of env kwargs, e.g. '{"domain": "moon", "asset_source": "dataset"}'."""
     seed_start: int = 0
     action_noise: float = 0.0
-    """DART-style demonstrations (Laskey et al. 2017), ``pd_ee_delta_pose`` only: Gaussian noise of this standard
-    deviation (normalised action units; 0.03 moves the TCP about 3 mm) is added to the arm's part of every action
-    the env executes, while the file records the oracle's own action. The oracle, closed loop, then labels how to
-    come back from states a little off its path, the states an imitation learner's own errors lead to. The file's
-    env states are the executed ones (replay them with ``--use-env-states``, not by their actions)."""
+    """DART-style demonstrations (Laskey et al. 2017): Gaussian noise of this standard deviation is added to the
+    arm's part of every action the env executes, while the file records the oracle's own action, in the control
+    mode's units: normalised for ``pd_ee_delta_pose`` (0.03 moves the TCP about 3 mm; the closed-loop oracle
+    corrects it at its next step), radians of joint target for ``pd_joint_pos`` (0.002 moves the TCP about 2 mm; the
+    next absolute target takes the arm back to the oracle's path). The demonstrations then show how to come back from
+    states a little off the oracle's path, the states an imitation learner's own errors lead to. The file's env
+    states are the executed ones (replay them with ``--use-env-states``, not by their actions)."""
 
 
 @dataclass(frozen=True)
@@ -182,9 +184,7 @@ def check_args(args: Args) -> None:
     check_at_least("--num-traj", args.num_traj, 1)
     check_at_least("--num-procs", args.num_procs, 1)
     check_at_least("--seed-start", args.seed_start, 0)
-    checked_number("--action-noise", args.action_noise, 0.0, 1.0, meaning="normalised action units")
-    if args.action_noise > 0 and args.control_mode != EE_CONTROL_MODE:
-        raise ValueError(f"--action-noise needs --control-mode {EE_CONTROL_MODE} (the oracle then corrects the noise at the next step), not {args.control_mode!r}")
+    checked_number("--action-noise", args.action_noise, 0.0, 1.0, meaning="the control mode's action units: normalised, or radians for pd_joint_pos")
     if args.record_rewards and args.reward_mode in (None, "none"):
         raise ValueError("--record-rewards needs --reward-mode (e.g. normalized_dense; it names the reward the file stores)")
     kwargs = parse_json_object(args.env_kwargs, "--env-kwargs")

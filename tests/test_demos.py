@@ -107,25 +107,26 @@ def test_demos_record_the_dense_reward_the_env_computes_when_asked(tmp_path):
     assert success[-1] and rewards[-1] == 1.0 and rewards[0] < 0.5  # the normalised reward: 1 once solved, less before
 
 
-def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path):
+@pytest.mark.parametrize("control_mode, noise_std", [("pd_ee_delta_pose", 0.05), ("pd_joint_pos", 0.003)])
+def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path, control_mode, noise_std):
     def record(noise):
-        args = demos.Args(env_id="SampleCollection-v1", control_mode="pd_ee_delta_pose", num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name=f"noise{noise}", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=21, action_noise=noise)
+        args = demos.Args(env_id="SampleCollection-v1", control_mode=control_mode, num_traj=1, num_procs=1, record_dir=str(tmp_path), traj_name=f"noise{noise}", env_kwargs='{"domain": "moon", "asset_source": "dataset"}', seed_start=21, action_noise=noise)
         with h5py.File(demos.main(args).path) as trajectories:
             return trajectories["traj_0"]["actions"][:], trajectories["traj_0"]["env_states"]["articulations"]["panda"][:]
 
     clean_actions, clean_states = record(0.0)
-    noisy_actions, noisy_states = record(0.05)
-    again_actions, again_states = record(0.05)
+    noisy_actions, noisy_states = record(noise_std)
+    again_actions, again_states = record(noise_std)
     np.testing.assert_array_equal(noisy_actions, again_actions)  # the noise is drawn from the episode's seed
     np.testing.assert_array_equal(noisy_states, again_states)
     both_states = min(len(clean_states), len(noisy_states))
     assert np.abs(noisy_states[:both_states] - clean_states[:both_states]).max() > 1e-3  # the executed motion was perturbed
     # the recorded actions are the oracle's corrections, not the executed (noisy) ones: replaying them does not
     # retrace the recorded states, as replaying a clean demonstration does
-    assert np.abs(noisy_actions).max() <= 1.0
+    np.testing.assert_array_equal(noisy_actions[0], clean_actions[0])  # the oracle's first action, not the noisy one executed
     both_actions = min(len(clean_actions), len(noisy_actions))
     assert not np.allclose(noisy_actions[:both_actions], clean_actions[:both_actions])
-    env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", render_backend="none")
+    env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode=control_mode, render_backend="none")
     env.reset(seed=21)
     for action in noisy_actions[:30]:
         env.step(action)
