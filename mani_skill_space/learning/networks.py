@@ -122,12 +122,45 @@ class BehaviourCloningPolicy(nn.Module):
         return self(obs["state"])
 
 
-class DiffusionNoisePredictor(nn.Module):
+class _ActionRange:
+    """A denoiser's action chunks live in [-1, 1] (DDPM's ``clip_sample``). With ``action_range`` the model maps them
+    to the demonstrations' per-dimension [min, max] (Chi et al.'s normalisation; ``action_low``, ``action_high``), for
+    actions not already normalised, such as ``pd_joint_pos``'s joint targets in radians."""
+
+    def _register_action_range(self, action_dim: int, action_range: bool) -> None:
+        self.action_range = action_range
+        if action_range:
+            self.register_buffer("action_low", -torch.ones(action_dim))
+            self.register_buffer("action_high", torch.ones(action_dim))
+
+    def fit_action_range(self, actions: torch.Tensor) -> None:
+        """Set the range from demonstrated actions (..., action_dim)."""
+        if self.action_range:
+            flat = actions.reshape(-1, actions.shape[-1])
+            self.action_low.copy_(flat.min(0).values)
+            self.action_high.copy_(flat.max(0).values)
+
+    def to_unit(self, actions: torch.Tensor) -> torch.Tensor:
+        if not self.action_range:
+            return actions
+        return 2.0 * (actions - self.action_low) / self._action_span() - 1.0
+
+    def from_unit(self, chunk: torch.Tensor) -> torch.Tensor:
+        if not self.action_range:
+            return chunk
+        return self.action_low + (chunk + 1.0) / 2.0 * self._action_span()
+
+    def _action_span(self) -> torch.Tensor:
+        return (self.action_high - self.action_low).clamp_min(1e-6)
+
+
+class DiffusionNoisePredictor(_ActionRange, nn.Module):
     """The diffusion policy's denoiser: predicts the noise in an action chunk, given the observation history
     and the diffusion step (an MLP version of Chi et al.'s conditional network)."""
 
-    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, hidden: int = 512, step_features: int = 64):
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, hidden: int = 512, step_features: int = 64, action_range: bool = False):
         super().__init__()
+        self._register_action_range(action_dim, action_range)
         self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
         self.step_features = step_features
         self.net = mlp([action_dim * action_horizon + state_dim * obs_horizon + step_features, hidden, hidden, hidden, action_dim * action_horizon], nn.Mish)
@@ -175,13 +208,14 @@ def _convolution(channels_in: int, channels_out: int, kernel: int, groups: int) 
     return nn.Sequential(nn.Conv1d(channels_in, channels_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, channels_out), nn.Mish())
 
 
-class DiffusionUnetNoisePredictor(nn.Module):
+class DiffusionUnetNoisePredictor(_ActionRange, nn.Module):
     """The diffusion policy's denoiser as Chi et al. (and ManiSkill's diffusion policy baseline) build it: a 1-D
     UNet over the action chunk's time axis, every residual block conditioned (FiLM) on the diffusion step's
     embedding and the observation history. ``action_horizon`` must be divisible by 2 ** (len(channels) - 1)."""
 
-    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, channels: Sequence[int] = (64, 128, 256), step_features: int = 64):
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, channels: Sequence[int] = (64, 128, 256), step_features: int = 64, action_range: bool = False):
         super().__init__()
+        self._register_action_range(action_dim, action_range)
         if action_horizon % 2 ** (len(channels) - 1):
             raise ValueError(f"action_horizon {action_horizon} must be divisible by {2 ** (len(channels) - 1)} for {len(channels)} UNet levels")
         self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
@@ -229,12 +263,12 @@ MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianAct
 
 
 def denoise(model: nn.Module, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
-    """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion; ``generator`` draws
-    the initial noise and every step's noise (the same generator state, the same chunk)."""
+    """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion, in the env's action
+    units; ``generator`` draws the initial noise and every step's noise (the same generator state, the same chunk)."""
     actions = torch.randn((obs_history.shape[0], model.action_horizon, model.action_dim), generator=generator, device=obs_history.device)
     scheduler.set_timesteps(inference_steps)
     for step in scheduler.timesteps:
         noise = model(actions, step.to(obs_history.device), obs_history)
         actions = scheduler.step(noise, step, actions, generator=generator).prev_sample
-    return actions.clamp(-1.0, 1.0)
+    return model.from_unit(actions.clamp(-1.0, 1.0))
 
