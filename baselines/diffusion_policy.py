@@ -67,9 +67,9 @@ class Args:
     1-D UNet over the chunk's time axis, FiLM-conditioned (``DiffusionUnetNoisePredictor``, as ManiSkill's baseline;
     ``--action-horizon`` a multiple of 4)."""
     hidden: int = 512
-    action_normalisation: Literal["auto", "none", "min-max"] = "auto"
+    action_scaling: Literal["auto", "none", "min-max"] = "auto"
     """How the demonstrated actions map to the [-1, 1] the denoiser works in (DDPM clips its samples there):
-    ``min-max`` scales each dimension from the demonstrations' range (Chi et al.); ``none`` takes them as they are
+    ``min-max`` scales every dimension from the demonstrations' range (Chi et al.); ``none`` takes them as they are
     (ManiSkill's normalised delta modes, e.g. ``pd_ee_delta_pose``); ``auto`` is ``min-max`` where any demonstrated
     action lies outside [-1, 1] (``pd_joint_pos``'s joint targets in radians), ``none`` otherwise."""
     eval_every: int = 5000
@@ -101,6 +101,11 @@ def chunk_windows(episodes, obs_horizon: int, action_horizon: int) -> tuple[torc
     return torch.as_tensor(np.concatenate(obs)), torch.as_tensor(np.concatenate(actions))
 
 
+def scales_actions(action_scaling: str, actions: torch.Tensor) -> bool:
+    """Whether ``--action-scaling`` asks for min-max scaling of these demonstrated actions."""
+    return action_scaling == "min-max" or (action_scaling == "auto" and bool((actions.abs() > 1).any()))
+
+
 def evaluate(policy, env_id: str, env_kwargs: dict, seeds) -> dict[str, float]:
     from mani_skill_space.rollout import evaluate_policy  # the simulator only where training evaluates
 
@@ -116,14 +121,15 @@ def main(args: Args) -> Path:
     all_obs = np.concatenate([e["obs"] for e in episodes])
     sample_obs, sample_actions = (x.to(device) for x in chunk_windows(episodes, args.obs_horizon, args.action_horizon))
     model_kwargs = dict(state_dim=all_obs.shape[1], action_dim=episodes[0]["actions"].shape[1], obs_horizon=args.obs_horizon, action_horizon=args.action_horizon)
-    model_kwargs["action_range"] = args.action_normalisation == "min-max" or (args.action_normalisation == "auto" and bool((sample_actions.abs() > 1).any()))
+    if scales_actions(args.action_scaling, sample_actions):
+        model_kwargs["scale_actions"] = True  # only then: checkpoints without scaling load in code that predates it
     if args.denoiser == "mlp":
         model_kwargs["hidden"] = args.hidden
     model = (DiffusionNoisePredictor if args.denoiser == "mlp" else DiffusionUnetNoisePredictor)(**model_kwargs)
     model.obs_mean.copy_(torch.as_tensor(all_obs.mean(0)))
     model.obs_std.copy_(torch.as_tensor(all_obs.std(0)).clamp_min(1e-3))
     model.to(device)
-    model.fit_action_range(sample_actions)
+    model.fit_action_scaling(sample_actions)
     sample_actions = model.to_unit(sample_actions)
     denoiser = model if args.compile == "off" else torch.compile(model, mode=args.compile)
     scheduler_config = dict(num_train_timesteps=args.diffusion_steps, beta_schedule="squaredcos_cap_v2", clip_sample=True, prediction_type="epsilon")
@@ -146,7 +152,7 @@ def main(args: Args) -> Path:
         if ema is not None:
             ema.restore(model.parameters())
 
-    normalised = " (actions scaled from their min-max range)" if model.action_range else ""
+    normalised = " (actions scaled from their min-max range)" if model.scale_actions else ""
     print(f"{len(episodes)} demonstrations, {len(sample_obs)} samples of {env_id} {env_kwargs} on {device}{normalised}; training in {run_dir}")
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     start = time.time()

@@ -40,7 +40,6 @@ from mani_skill_space.cli_support import check_at_least, checking_inputs, parse_
 from mani_skill_space.envs import task_class
 from mani_skill_space.kwarg_checks import checked_number
 from mani_skill_space.oracles import ORACLE_CONTROL_MODES, ORACLES, oracle_for
-from mani_skill_space.oracles.end_effector import CONTROL_MODE as EE_CONTROL_MODE
 from mani_skill_space.rollout import run_episode
 from mani_skill_space.suites import check_env_kwargs
 
@@ -90,9 +89,10 @@ class Args:
     """DART-style demonstrations (Laskey et al. 2017): Gaussian noise of this standard deviation is added to the
     arm's part of every action the env executes, while the file records the oracle's own action, in the control
     mode's units: normalised for ``pd_ee_delta_pose`` (0.03 moves the TCP about 3 mm; the closed-loop oracle
-    corrects it at its next step), radians of joint target for ``pd_joint_pos`` (0.002 moves the TCP about 2 mm; the
-    next absolute target takes the arm back to the oracle's path). The demonstrations then show how to come back from
-    states a little off the oracle's path, the states an imitation learner's own errors lead to. The file's env
+    corrects it at its next step), radians of joint target for ``pd_joint_pos`` (0.002 moves the TCP about 2 mm;
+    while the oracle follows a planned path, its next absolute target takes the arm back to it, and each new motion
+    is planned from where the arm is). The demonstrations then show how to come back from states a little off the
+    oracle's path, the states an imitation learner's own errors lead to. The file's env
     states are the executed ones (replay them with ``--use-env-states``, not by their actions)."""
 
 

@@ -57,7 +57,7 @@ def joint_demos(tmp_path_factory):
     """One oracle demonstration of SampleCollection in pd_joint_pos (absolute joint targets), with state observations."""
     out = tmp_path_factory.mktemp("joint_demos")
     subprocess.run(
-        [sys.executable, "-m", "mani_skill_space.demos", "-e", "SampleCollection-v1", "-n", "1", "-j", "1", "-o", "state", "--record-dir", str(out),
+        [sys.executable, "-m", "mani_skill_space.demos", "-e", "SampleCollection-v1", "-n", "1", "-j", "1", "--only-count-success", "-o", "state", "--record-dir", str(out),
          "--traj-name", "joint", "--env-kwargs", json.dumps(ENV_KWARGS)],
         check=True, cwd=ROOT,
     )  # fmt: skip
@@ -152,44 +152,46 @@ def test_diffusion_policy(denoiser, demos, tmp_path):
     assert saved["diffusion"]["inference_steps"] == 10
     assert saved["model_class"] == {"mlp": "DiffusionNoisePredictor", "unet": "DiffusionUnetNoisePredictor"}[denoiser]
     assert sorted(p.name for p in (tmp_path / "dp").glob("snapshot-*.pt")) == ["snapshot-30.pt", "snapshot-60.pt"]
+    assert "scale_actions" not in saved["model_kwargs"] and "action_low" not in saved["state_dict"]  # delta actions, as they are
     snapshot = torch.load(tmp_path / "dp" / "snapshot-60.pt", weights_only=True)["state_dict"]
     assert snapshot.keys() == saved["state_dict"].keys() and all(torch.equal(snapshot[k], saved["state_dict"][k]) for k in snapshot)
     _score(checkpoint, tmp_path)
 
 
-def test_the_diffusion_policy_learns_joint_targets_in_radians_scaled_from_their_range(joint_demos, tmp_path):
+def test_the_diffusion_policy_scales_joint_targets_in_radians_from_their_range(joint_demos, tmp_path):
     dp = _baseline("diffusion_policy")
-    checkpoint = dp.main(dp.Args(demos=joint_demos, max_iterations=4, eval_every=4, eval_episodes=0, batch_size=8, diffusion_steps=5, hidden=32, output_dir=tmp_path, name="joint"))
+    tiny = dict(demos=joint_demos, eval_episodes=0, batch_size=8, diffusion_steps=5, hidden=32, output_dir=tmp_path)
+    checkpoint = dp.main(dp.Args(**tiny, max_iterations=4, eval_every=4, ema=True, name="joint"))
     episodes, _ = load_demonstrations(joint_demos)
     demonstrated = torch.as_tensor(episodes[0]["actions"])
     assert demonstrated.abs().max() > 1.5  # the elbow's target, about -2 rad: outside the denoiser's [-1, 1]
     policy = CheckpointPolicy(str(checkpoint))
-    assert policy.control_mode == "pd_joint_pos" and policy.model.action_range
-    torch.testing.assert_close(policy.model.action_low, demonstrated.min(0).values)
+    assert policy.control_mode == "pd_joint_pos" and policy.model.scale_actions
+    torch.testing.assert_close(policy.model.action_low, demonstrated.min(0).values)  # buffers, not averaged by the EMA
     torch.testing.assert_close(policy.model.action_high, demonstrated.max(0).values)
     policy.reset(SimpleNamespace(unwrapped=SimpleNamespace(spec=None)), seed=0)
     action = policy.act(torch.as_tensor(episodes[0]["obs"][:1]))  # (1, action_dim), in radians: within the demonstrated range
     assert ((action >= policy.model.action_low - 1e-5) & (action <= policy.model.action_high + 1e-5)).all()
     assert action.abs().max() > 1.5  # not clipped to [-1, 1]
-    forced = dp.main(dp.Args(demos=joint_demos, max_iterations=1, eval_every=1, eval_episodes=0, batch_size=8, diffusion_steps=5, hidden=32, output_dir=tmp_path, name="none", action_normalisation="none"))
-    assert not CheckpointPolicy(str(forced)).model.action_range
+    unscaled = dp.main(dp.Args(**tiny, max_iterations=1, eval_every=1, name="none", action_scaling="none"))
+    assert not CheckpointPolicy(str(unscaled)).model.scale_actions
 
 
-def test_the_denoisers_action_range_maps_the_unit_interval_onto_the_demonstrated_one():
+def test_the_denoisers_action_scaling_maps_the_unit_interval_onto_the_demonstrated_range():
     from mani_skill_space.learning import DiffusionNoisePredictor
 
-    actions = torch.tensor([[-2.5, 0.0, 0.04], [3.0, 0.0, -0.01], [0.5, 0.0, 0.0]])
-    for model in (DiffusionNoisePredictor(3, 3, 2, 8, hidden=8, action_range=True), DiffusionUnetNoisePredictor(3, 3, 2, 8, action_range=True)):
-        model.fit_action_range(actions)
+    actions = torch.tensor([[-2.5, 0.3, 0.04], [3.0, 0.3, -0.01], [0.5, 0.3, 0.0]])
+    for model in (DiffusionNoisePredictor(3, 3, 2, 8, hidden=8, scale_actions=True), DiffusionUnetNoisePredictor(3, 3, 2, 8, scale_actions=True)):
+        model.fit_action_scaling(actions)
         unit = model.to_unit(actions)
-        assert unit[:, 0].tolist() == pytest.approx([-1.0, 1.0, 2 * 3.0 / 5.5 - 1.0])
+        assert unit[:, 0].tolist() == pytest.approx([-1.0, 1.0, (0.5 - 0.25) / 2.75])
+        assert unit[:, 1].tolist() == [0.0, 0.0, 0.0]  # a dimension that never varies sits at the centre
         assert unit.abs().max() <= 1.0 + 1e-6
         torch.testing.assert_close(model.from_unit(unit), actions)
-        torch.testing.assert_close(model.from_unit(torch.ones(3)), actions.max(0).values)
+        torch.testing.assert_close(model.from_unit(torch.ones(3)), torch.tensor([3.0, 0.3, 0.04]))
     plain = DiffusionNoisePredictor(3, 3, 2, 8, hidden=8)
-    assert "action_low" not in plain.state_dict()  # checkpoints saved before the range existed load unchanged
-    torch.testing.assert_close(plain.from_unit(plain.to_unit(actions)), actions)
-    assert torch.equal(plain.to_unit(actions), actions)
+    assert "action_low" not in plain.state_dict()  # what checkpoints saved without scaling hold (dp_tubes_dart.pt loads: above)
+    assert torch.equal(plain.to_unit(actions), actions) and torch.equal(plain.from_unit(actions), actions)
 
 
 def test_the_diffusion_policy_samples_its_chunks_from_noise_seeded_by_the_episode():

@@ -121,11 +121,11 @@ def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path
     np.testing.assert_array_equal(noisy_states, again_states)
     both_states = min(len(clean_states), len(noisy_states))
     assert np.abs(noisy_states[:both_states] - clean_states[:both_states]).max() > 1e-3  # the executed motion was perturbed
-    # the recorded actions are the oracle's corrections, not the executed (noisy) ones: replaying them does not
-    # retrace the recorded states, as replaying a clean demonstration does
     np.testing.assert_array_equal(noisy_actions[0], clean_actions[0])  # the oracle's first action, not the noisy one executed
     both_actions = min(len(clean_actions), len(noisy_actions))
     assert not np.allclose(noisy_actions[:both_actions], clean_actions[:both_actions])
+    # the recorded actions are the oracle's own, not the executed (noisy) ones: replaying them does not retrace the
+    # recorded states, as replaying a clean demonstration does
     env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode=control_mode, render_backend="none")
     env.reset(seed=21)
     for action in noisy_actions[:30]:

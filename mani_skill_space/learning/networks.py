@@ -122,45 +122,48 @@ class BehaviourCloningPolicy(nn.Module):
         return self(obs["state"])
 
 
-class _ActionRange:
-    """A denoiser's action chunks live in [-1, 1] (DDPM's ``clip_sample``). With ``action_range`` the model maps them
-    to the demonstrations' per-dimension [min, max] (Chi et al.'s normalisation; ``action_low``, ``action_high``), for
-    actions not already normalised, such as ``pd_joint_pos``'s joint targets in radians."""
+class _ActionScaling:
+    """A denoiser's action chunks live in [-1, 1] (DDPM's ``clip_sample``). With ``scale_actions`` the model maps that
+    interval onto the demonstrations' per-dimension [min, max] (Chi et al.'s normalisation; buffers ``action_low`` and
+    ``action_high``), for actions not already normalised, such as ``pd_joint_pos``'s joint targets in radians. A
+    dimension that never varies maps to 0 and back to its one value."""
 
-    def _register_action_range(self, action_dim: int, action_range: bool) -> None:
-        self.action_range = action_range
-        if action_range:
+    def _register_action_scaling(self, action_dim: int, scale_actions: bool) -> None:
+        self.scale_actions = scale_actions
+        if scale_actions:
             self.register_buffer("action_low", -torch.ones(action_dim))
             self.register_buffer("action_high", torch.ones(action_dim))
 
-    def fit_action_range(self, actions: torch.Tensor) -> None:
+    def fit_action_scaling(self, actions: torch.Tensor) -> None:
         """Set the range from demonstrated actions (..., action_dim)."""
-        if self.action_range:
+        if self.scale_actions:
             flat = actions.reshape(-1, actions.shape[-1])
             self.action_low.copy_(flat.min(0).values)
             self.action_high.copy_(flat.max(0).values)
 
     def to_unit(self, actions: torch.Tensor) -> torch.Tensor:
-        if not self.action_range:
+        if not self.scale_actions:
             return actions
-        return 2.0 * (actions - self.action_low) / self._action_span() - 1.0
+        centre, half_span = self._centre_and_half_span()
+        return (actions - centre) / half_span
 
     def from_unit(self, chunk: torch.Tensor) -> torch.Tensor:
-        if not self.action_range:
+        if not self.scale_actions:
             return chunk
-        return self.action_low + (chunk + 1.0) / 2.0 * self._action_span()
+        centre, half_span = self._centre_and_half_span()
+        return centre + chunk * half_span
 
-    def _action_span(self) -> torch.Tensor:
-        return (self.action_high - self.action_low).clamp_min(1e-6)
+    def _centre_and_half_span(self) -> tuple[torch.Tensor, torch.Tensor]:
+        return (self.action_high + self.action_low) / 2.0, ((self.action_high - self.action_low) / 2.0).clamp_min(1e-6)
 
 
-class DiffusionNoisePredictor(_ActionRange, nn.Module):
+class DiffusionNoisePredictor(_ActionScaling, nn.Module):
     """The diffusion policy's denoiser: predicts the noise in an action chunk, given the observation history
     and the diffusion step (an MLP version of Chi et al.'s conditional network)."""
 
-    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, hidden: int = 512, step_features: int = 64, action_range: bool = False):
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, hidden: int = 512, step_features: int = 64, scale_actions: bool = False):
         super().__init__()
-        self._register_action_range(action_dim, action_range)
+        self._register_action_scaling(action_dim, scale_actions)
         self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
         self.step_features = step_features
         self.net = mlp([action_dim * action_horizon + state_dim * obs_horizon + step_features, hidden, hidden, hidden, action_dim * action_horizon], nn.Mish)
@@ -208,14 +211,14 @@ def _convolution(channels_in: int, channels_out: int, kernel: int, groups: int) 
     return nn.Sequential(nn.Conv1d(channels_in, channels_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, channels_out), nn.Mish())
 
 
-class DiffusionUnetNoisePredictor(_ActionRange, nn.Module):
+class DiffusionUnetNoisePredictor(_ActionScaling, nn.Module):
     """The diffusion policy's denoiser as Chi et al. (and ManiSkill's diffusion policy baseline) build it: a 1-D
     UNet over the action chunk's time axis, every residual block conditioned (FiLM) on the diffusion step's
     embedding and the observation history. ``action_horizon`` must be divisible by 2 ** (len(channels) - 1)."""
 
-    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, channels: Sequence[int] = (64, 128, 256), step_features: int = 64, action_range: bool = False):
+    def __init__(self, state_dim: int, action_dim: int, obs_horizon: int, action_horizon: int, channels: Sequence[int] = (64, 128, 256), step_features: int = 64, scale_actions: bool = False):
         super().__init__()
-        self._register_action_range(action_dim, action_range)
+        self._register_action_scaling(action_dim, scale_actions)
         if action_horizon % 2 ** (len(channels) - 1):
             raise ValueError(f"action_horizon {action_horizon} must be divisible by {2 ** (len(channels) - 1)} for {len(channels)} UNet levels")
         self.state_dim, self.action_dim, self.obs_horizon, self.action_horizon = state_dim, action_dim, obs_horizon, action_horizon
@@ -262,9 +265,9 @@ class DiffusionUnetNoisePredictor(_ActionRange, nn.Module):
 MODELS = {cls.__name__: cls for cls in (GaussianActorCritic, SquashedGaussianActor, BehaviourCloningPolicy, DiffusionNoisePredictor, DiffusionUnetNoisePredictor)}
 
 
-def denoise(model: nn.Module, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
+def denoise(model: _ActionScaling, scheduler, obs_history: torch.Tensor, inference_steps: int, generator: Optional[torch.Generator] = None) -> torch.Tensor:
     """Sample an action chunk (n, action_horizon, action_dim) by running the reverse diffusion, in the env's action
-    units; ``generator`` draws the initial noise and every step's noise (the same generator state, the same chunk)."""
+    units (the denoiser's ``from_unit``); ``generator`` draws the initial noise and every step's noise (the same generator state, the same chunk)."""
     actions = torch.randn((obs_history.shape[0], model.action_horizon, model.action_dim), generator=generator, device=obs_history.device)
     scheduler.set_timesteps(inference_steps)
     for step in scheduler.timesteps:
