@@ -42,6 +42,16 @@ def test_a_foreign_checkpoint_is_refused(tmp_path):
         load_checkpoint(path)
 
 
+def test_a_checkpoint_whose_model_does_not_fit_this_version_is_named(tmp_path):
+    model = BehaviourCloningPolicy(state_dim=5, action_dim=2, hidden=8, depth=1)
+    foreign_kwargs = save_checkpoint(tmp_path / "kwargs.pt", "bc", model, dict(state_dim=5, action_dim=2, hidden=8, depth=1, width_scale=2), "SampleCollection-v1", {}, "state", "pd_ee_delta_pose")
+    with pytest.raises(CheckpointError, match=r"kwargs.pt does not fit this version's BehaviourCloningPolicy \(.*width_scale"):
+        CheckpointPolicy(str(foreign_kwargs))
+    other_shapes = save_checkpoint(tmp_path / "shapes.pt", "bc", model, dict(state_dim=5, action_dim=2, hidden=16, depth=1), "SampleCollection-v1", {}, "state", "pd_ee_delta_pose")
+    with pytest.raises(CheckpointError, match="shapes.pt does not fit"):
+        CheckpointPolicy(str(other_shapes))
+
+
 def test_a_missing_checkpoint_is_named(tmp_path):
     with pytest.raises(CheckpointError, match="nothing.pt"):
         CheckpointPolicy(str(tmp_path / "nothing.pt"))

@@ -80,7 +80,10 @@ class CheckpointPolicy(Policy):
         self.path = Path(path)
         self.checkpoint = load_checkpoint(self.path, device)
         self.device = torch.device(device)
-        self.model = load_model(self.checkpoint, device)
+        try:
+            self.model = load_model(self.checkpoint, device)
+        except (TypeError, RuntimeError) as error:  # constructor kwargs or weights another version of the model wrote
+            raise CheckpointError(f"{self.path} does not fit this version's {self.checkpoint['model_class']} ({str(error).splitlines()[0]})") from error
         self.control_mode = self.checkpoint["control_mode"]
         self.obs_mode = self.checkpoint["obs_mode"]
         self.env_id = self.checkpoint["env_id"]
