@@ -152,8 +152,8 @@ def main(args: Args) -> Path:
         if ema is not None:
             ema.restore(model.parameters())
 
-    normalised = " (actions scaled from their min-max range)" if model.scale_actions else ""
-    print(f"{len(episodes)} demonstrations, {len(sample_obs)} samples of {env_id} {env_kwargs} on {device}{normalised}; training in {run_dir}")
+    scaling = " (actions scaled from their min-max range)" if model.scale_actions else ""
+    print(f"{len(episodes)} demonstrations, {len(sample_obs)} samples of {env_id} {env_kwargs} on {device}{scaling}; training in {run_dir}")
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     start = time.time()
     progress = tqdm(range(1, args.max_iterations + 1), desc="diffusion")

@@ -92,8 +92,8 @@ class Args:
     corrects it at its next step), radians of joint target for ``pd_joint_pos`` (0.002 moves the TCP about 2 mm;
     while the oracle follows a planned path, its next absolute target takes the arm back to it, and each new motion
     is planned from where the arm is). The demonstrations then show how to come back from states a little off the
-    oracle's path, the states an imitation learner's own errors lead to. The file's env
-    states are the executed ones (replay them with ``--use-env-states``, not by their actions)."""
+    oracle's path, the states an imitation learner's own errors lead to. The file's env states are the executed ones
+    (replay them with ``--use-env-states``, not by their actions)."""
 
 
 @dataclass(frozen=True)

@@ -127,6 +127,7 @@ def test_noisy_demos_record_the_oracles_actions_and_the_executed_states(tmp_path
     # the recorded actions are the oracle's own, not the executed (noisy) ones: replaying them does not retrace the
     # recorded states, as replaying a clean demonstration does
     env = gym.make("SampleCollection-v1", domain="moon", asset_source="dataset", control_mode=control_mode, render_backend="none")
+    assert (noisy_actions >= env.action_space.low).all() and (noisy_actions <= env.action_space.high).all()
     env.reset(seed=21)
     for action in noisy_actions[:30]:
         env.step(action)
