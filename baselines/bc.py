@@ -44,7 +44,11 @@ class Args:
     demos: Path
     """A ManiSkill trajectory file with state observations (converted with the replay tool)."""
     num_demos: Optional[int] = None
-    """Use only the first N successful demonstrations."""
+    """Use only the first N successful demonstrations (the first N, with ``--unsuccessful-demos``)."""
+    unsuccessful_demos: bool = False
+    """Learn from every demonstration in the file, not only the successful ones: for a task whose demonstrations run out
+    of time before its end (Solar Panel Assembly's in ``pd_ee_delta_pose`` fill two or three of the four sockets in
+    its 1000 steps), what they show up to there."""
     minutes: float = 20.0
     """Wall-clock training budget (evaluations included)."""
     max_iterations: int = 100_000
@@ -73,7 +77,7 @@ class Args:
 
 def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
-    episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
+    episodes, env_info = load_demonstrations(args.demos, success_only=not args.unsuccessful_demos, limit=args.num_demos)
     env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
     obs = torch.as_tensor(np.concatenate([e["obs"][:-1] for e in episodes]))
     actions = torch.as_tensor(np.concatenate([e["actions"] for e in episodes]))

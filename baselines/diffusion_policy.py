@@ -43,6 +43,11 @@ class Args:
     demos: Path
     """A ManiSkill trajectory file with state observations (converted with the replay tool)."""
     num_demos: Optional[int] = None
+    """Use only the first N successful demonstrations (the first N, with ``--unsuccessful-demos``)."""
+    unsuccessful_demos: bool = False
+    """Learn from every demonstration in the file, not only the successful ones: for a task whose demonstrations run out
+    of time before its end (Solar Panel Assembly's in ``pd_ee_delta_pose`` fill two or three of the four sockets in
+    its 1000 steps), what they show up to there."""
     obs_horizon: int = 2
     action_horizon: int = 8
     """Actions predicted per chunk."""
@@ -115,7 +120,7 @@ def evaluate(policy, env_id: str, env_kwargs: dict, seeds) -> dict[str, float]:
 def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    episodes, env_info = load_demonstrations(args.demos, limit=args.num_demos)
+    episodes, env_info = load_demonstrations(args.demos, success_only=not args.unsuccessful_demos, limit=args.num_demos)
     env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
     device = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device)
     all_obs = np.concatenate([e["obs"] for e in episodes])

@@ -112,6 +112,23 @@ def test_behaviour_cloning(demos, tmp_path):
     _score(checkpoint, tmp_path)
 
 
+@pytest.mark.parametrize("learner", ["bc", "diffusion_policy"])
+def test_imitation_learns_from_unsuccessful_demonstrations_only_when_asked(learner, demos, tmp_path):
+    out_of_time = tmp_path / "out_of_time.h5"
+    shutil.copy(demos, out_of_time)
+    meta = json.loads(demos.with_suffix(".json").read_text())
+    for episode in meta["episodes"]:
+        episode["success"] = False
+    out_of_time.with_suffix(".json").write_text(json.dumps(meta))
+    baseline = _baseline(learner)
+    with pytest.raises(ValueError, match="holds no successful episodes"):
+        baseline.main(baseline.Args(demos=out_of_time, max_iterations=2, eval_episodes=0, output_dir=tmp_path, name="refused"))
+
+    checkpoint = baseline.main(baseline.Args(demos=out_of_time, unsuccessful_demos=True, max_iterations=20, eval_episodes=0, output_dir=tmp_path, name="learned"))
+    assert CheckpointPolicy(str(checkpoint)).env_id == "SampleCollection-v1"
+    assert len(load_demonstrations(out_of_time, success_only=False)[0]) == len(meta["episodes"])
+
+
 def test_bc_balanced_action_loss_weighs_each_dimension_by_its_inverse_variance():
     bc = _baseline("bc")
     generator = torch.Generator().manual_seed(0)
