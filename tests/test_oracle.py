@@ -188,6 +188,34 @@ def test_of_two_alike_grasps_the_one_the_hand_turns_less_to_reach_comes_first():
     env.close()
 
 
+@pytest.mark.parametrize(
+    "fraction, off_axis, stayed",
+    [
+        (1.0, 0.0, True),
+        (0.85, 0.004, True),  # leaning in the clearance, a little way out
+        (0.5, 0.0, False),  # sprung back out of the socket
+        (9.5, 0.3, False),  # dropped on the ground beside the socket: below the bottom's plane, far off the axis
+    ],
+)
+def test_a_peg_let_go_has_stayed_in_only_if_it_is_still_in_its_hole(fraction, off_axis, stayed):
+    from types import SimpleNamespace
+
+    import torch
+
+    from mani_skill_space.oracles.solar_panel import stayed_in
+
+    def pair(value, peg=1):
+        values = torch.full((1, 4, 4), 0.0)
+        values[0, peg, peg] = value
+        return values
+
+    env = SimpleNamespace(
+        evaluate=lambda: {"pair_inserted_fraction": pair(fraction), "pair_lateral_offset": pair(off_axis)},
+        insertion=SimpleNamespace(peg_radius=torch.full((1, 4), 0.01)),
+    )
+    assert stayed_in(env, 1) is stayed
+
+
 PAD = np.array([[-0.01, -0.01], [0.01, 0.01]])
 
 

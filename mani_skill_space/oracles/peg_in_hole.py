@@ -13,7 +13,7 @@ import numpy as np
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, surface_points
 from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
-from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES, STILL_IN_FRACTION
+from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES, stayed_in
 
 MODULE_MARGIN = 0.01
 """While taking the peg and carrying it over the hole, the planner keeps the arm this far (m) from the module:
@@ -76,7 +76,7 @@ class MultiPegInHoleOracle(Oracle):
             yield from PegInserter(self, MULTI_PEG_INSERTION, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
             yield from self.open_gently(8)
             yield from self.retreat_up(RETREAT_DISTANCES)
-            if float(env.evaluate()["pair_inserted_fraction"][0, hole, hole]) < STILL_IN_FRACTION:
+            if not stayed_in(env, hole):
                 raise PlanningFailed(f"peg {hole} did not stay in its hole")
         yield from self.wait_for_success(20)
 

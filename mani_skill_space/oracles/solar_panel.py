@@ -63,6 +63,16 @@ letting go (in orbit a peg let go while pressed into its socket springs back out
 tried again."""
 
 
+def stayed_in(env, peg: int) -> bool:
+    """Whether peg ``peg``, let go, is still in hole ``peg`` (of the env's ``insertion``): at least ``STILL_IN_FRACTION``
+    of the way in, with its end within the peg's radius of the hole's axis. A peg may lean in the clearance; one
+    dropped beside the hole lies deeper than the bottom's plane, far off the axis."""
+    info = env.evaluate()
+    fraction = float(info["pair_inserted_fraction"][0, peg, peg])
+    off_axis = float(info["pair_lateral_offset"][0, peg, peg])
+    return fraction >= STILL_IN_FRACTION and off_axis <= float(env.insertion.peg_radius[0, peg])
+
+
 class SolarPanelOracle(Oracle):
     screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
@@ -78,7 +88,7 @@ class SolarPanelOracle(Oracle):
             yield from self.retreat_up(RETREAT_DISTANCES)
             # let go, a peg may lean in its socket's clearance (or, in orbit, drift to a lean): the panel's
             # funnels right it; only a peg that has come out is a failure
-            if float(env.evaluate()["pair_inserted_fraction"][0, socket, socket]) < STILL_IN_FRACTION:
+            if not stayed_in(env, socket):
                 raise PlanningFailed(f"peg {socket} did not stay in its socket")
         self.make_solver(env, obstacles=self._obstacles(env))
         yield from self.place_panel(env)
