@@ -51,17 +51,21 @@ def main(args: Args) -> list[dict]:
 
 
 def markdown_table(rows: list[dict]) -> str:
+    """One line per checkpoint; where any scored env is staged (Solar Panel Assembly: sockets filled), a column with
+    the mean highest stage, as the evaluation CLI's table has."""
+    staged = any(row["summary"].get("stage_mean") is not None for row in rows)
     lines = [
-        "| checkpoint | env | kwargs | episodes (seeds) | success_once | success_at_end | return | manifest |",
-        "|---|---|---|---|---|---|---|---|",
+        "| checkpoint | env | kwargs | episodes (seeds) | success_once | success_at_end | return |" + (" stage |" if staged else "") + " manifest |",
+        "|---|---|---|---|---|---|---|" + ("---|" if staged else "") + "---|",
     ]
     for row in rows:
         s = row["summary"]
         kwargs = condition_label(row["kwargs"])
         seeds = f"{s['episodes']} ({row['seeds'][0]}-{row['seeds'][-1]})"
+        stage = (" - |" if s.get("stage_mean") is None else f" {s['stage_mean']:.2f} |") if staged else ""
         lines.append(
             f"| {row['name']} | {row['env_id']} | {kwargs} | {seeds} | {format_rate(s['success_once'], s['success_once_ci95'], decimals=0)} "
-            f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'], decimals=0)} | {s['return_mean']:.2f} | {100 * row['manifest_success_at_end']:.0f}% |"
+            f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'], decimals=0)} | {s['return_mean']:.2f} |{stage} {100 * row['manifest_success_at_end']:.0f}% |"
         )
     return "\n".join(lines)
 

@@ -40,6 +40,19 @@ def test_every_shipped_checkpoint_loads_and_runs_in_the_evaluation_cli(tmp_path)
     assert (tmp_path / "checkpoints.md").read_text().count("\n| ") == len(rows)  # the rows after the header
 
 
+def test_the_checkpoint_table_has_a_stage_column_only_where_an_env_is_staged():
+    table = _script("score_checkpoints").markdown_table
+
+    def row(name, stage_mean):
+        summary = dict(episodes=2, success_once=0.0, success_once_ci95=[0.0, 0.2], success_at_end=0.0, success_at_end_ci95=[0.0, 0.2], return_mean=1.0, stage_mean=stage_mean)
+        return dict(name=name, env_id="E", kwargs={}, manifest_success_at_end=0.0, summary=summary, seeds=[5000, 5001])
+
+    assert "stage" not in table([row("plain", None)])
+    lines = table([row("plain", None), row("staged", 1.5)]).splitlines()
+    assert lines[0].endswith("| stage | manifest |")
+    assert lines[2].endswith("| - | 0% |") and lines[3].endswith("| 1.50 | 0% |")
+
+
 ENTRY = """
 [[checkpoints]]
 name = "tiny"
