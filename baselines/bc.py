@@ -46,9 +46,9 @@ class Args:
     num_demos: Optional[int] = None
     """Use only the first N successful demonstrations (the first N, with ``--unsuccessful-demos``)."""
     unsuccessful_demos: bool = False
-    """Learn from every demonstration in the file, not only the successful ones: for a task whose demonstrations run out
-    of time before its end (Solar Panel Assembly's in ``pd_ee_delta_pose`` fill two or three of the four sockets in
-    its 1000 steps), what they show up to there."""
+    """Learn from every demonstration in the file, not only the successful ones: for a task whose demonstrations end
+    before success (Solar Panel Assembly's in ``pd_ee_delta_pose``: out of time, or stopped by a planning failure, with
+    one to three of the four sockets filled), the part of the task they do show."""
     minutes: float = 20.0
     """Wall-clock training budget (evaluations included)."""
     max_iterations: int = 100_000

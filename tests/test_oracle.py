@@ -193,6 +193,8 @@ def test_of_two_alike_grasps_the_one_the_hand_turns_less_to_reach_comes_first():
     [
         (1.0, 0.0, True),
         (0.85, 0.004, True),  # leaning in the clearance, a little way out
+        (1.0, 0.02, True),  # its end just within this peg's radius (0.02) of the axis
+        (1.0, 0.021, False),  # just beyond it
         (0.5, 0.0, False),  # sprung back out of the socket
         (9.5, 0.3, False),  # dropped on the ground beside the socket: below the bottom's plane, far off the axis
     ],
@@ -202,7 +204,7 @@ def test_a_peg_let_go_has_stayed_in_only_if_it_is_still_in_its_hole(fraction, of
 
     import torch
 
-    from mani_skill_space.oracles.solar_panel import stayed_in
+    from mani_skill_space.oracles.insertion import stayed_in
 
     def pair(value, peg=1):
         values = torch.full((1, 4, 4), 0.0)
@@ -211,7 +213,7 @@ def test_a_peg_let_go_has_stayed_in_only_if_it_is_still_in_its_hole(fraction, of
 
     env = SimpleNamespace(
         evaluate=lambda: {"pair_inserted_fraction": pair(fraction), "pair_lateral_offset": pair(off_axis)},
-        insertion=SimpleNamespace(peg_radius=torch.full((1, 4), 0.01)),
+        insertion=SimpleNamespace(peg_radius=torch.tensor([[0.01, 0.02, 0.005, 0.01]])),  # this peg's own radius counts
     )
     assert stayed_in(env, 1) is stayed
 

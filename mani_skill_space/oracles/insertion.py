@@ -99,6 +99,8 @@ AXIS_KEEPOUT = 0.04
 the planner's obstacles: the fingers holding the peg come that close to it."""
 KEEPOUT_BELOW_ENTRANCE = 0.01
 """...down to this far below the entrance (the fingers hold the peg above it)."""
+STILL_IN_FRACTION = 0.8
+"""How far in (of its hole's depth) a peg let go must still be to count as having stayed in (``stayed_in``)."""
 PUSH_JOINT_MARGIN = 0.15
 """rad: a push planned this close to a joint limit (anywhere along it) is taken only where no other is feasible: the
 servo's IK, re-solved from the joints as they are, finds no solution past a limit and the push stalls (traced on
@@ -485,6 +487,16 @@ PEG_MARGIN = 0.01
 """The arm keeps about this far (m) from the pegs already standing in their holes, sampled this densely: at the
 usual 2 cm spacing an open finger can pass between two points on a standing peg's top and knock it out of its
 socket. (Not around the pegs still lying on the deck: the hand must reach between them.)"""
+
+
+def stayed_in(env, peg: int) -> bool:
+    """Whether peg ``peg``, let go, is still in hole ``peg`` (of the env's ``insertion``): at least ``STILL_IN_FRACTION``
+    of the way in, with its end within the peg's radius of the hole's axis. A peg may lean in the clearance; one
+    dropped beside the hole lies deeper than the bottom's plane, far off the axis."""
+    info = env.evaluate()
+    fraction = float(info["pair_inserted_fraction"][0, peg, peg])
+    off_axis = float(info["pair_lateral_offset"][0, peg, peg])
+    return fraction >= STILL_IN_FRACTION and off_axis <= float(env.insertion.peg_radius[0, peg])
 
 
 def other_pegs(pegs: list, peg_assets: list, held: int, standing) -> np.ndarray:

@@ -11,9 +11,9 @@ from typing import Iterator
 import numpy as np
 
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, surface_points
-from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs
+from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
-from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES, stayed_in
+from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES
 
 MODULE_MARGIN = 0.01
 """While taking the peg and carrying it over the hole, the planner keeps the arm this far (m) from the module:

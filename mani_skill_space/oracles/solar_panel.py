@@ -15,7 +15,7 @@ import numpy as np
 import sapien
 
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
-from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs
+from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
 
 INSERTION_ORDER = (2, 3, 0, 1)
 """Sockets in the order they are filled: the farther (short) ones first."""
@@ -28,7 +28,6 @@ RETREAT_DISTANCES = (RETREAT_DISTANCE, 0.12, 0.06)
 PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
-STILL_IN_FRACTION = 0.8
 PANEL_PRE_GRASP = 0.1
 PANEL_PRE_GRASPS = (PANEL_PRE_GRASP, 0.06)
 PANEL_LEVEL_ACROSS = 0.5
@@ -61,16 +60,6 @@ PEG_INSERTION = InsertionSettings(
 """Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg; the push eases off before
 letting go (in orbit a peg let go while pressed into its socket springs back out of it), and a jammed push is
 tried again."""
-
-
-def stayed_in(env, peg: int) -> bool:
-    """Whether peg ``peg``, let go, is still in hole ``peg`` (of the env's ``insertion``): at least ``STILL_IN_FRACTION``
-    of the way in, with its end within the peg's radius of the hole's axis. A peg may lean in the clearance; one
-    dropped beside the hole lies deeper than the bottom's plane, far off the axis."""
-    info = env.evaluate()
-    fraction = float(info["pair_inserted_fraction"][0, peg, peg])
-    off_axis = float(info["pair_lateral_offset"][0, peg, peg])
-    return fraction >= STILL_IN_FRACTION and off_axis <= float(env.insertion.peg_radius[0, peg])
 
 
 class SolarPanelOracle(Oracle):
