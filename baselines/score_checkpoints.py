@@ -19,7 +19,7 @@ import tyro
 
 from mani_skill_space import eval as evaluation
 from mani_skill_space.learning.manifest import load_manifest
-from mani_skill_space.metrics import format_rate
+from mani_skill_space.metrics import any_staged, format_rate, stage_cell
 from mani_skill_space.protocol import condition_label
 from mani_skill_space.suites import Configuration, Suite
 
@@ -53,7 +53,7 @@ def main(args: Args) -> list[dict]:
 def markdown_table(rows: list[dict]) -> str:
     """One line per checkpoint; where any scored env is staged (Solar Panel Assembly: sockets filled), a column with
     the mean highest stage, as the evaluation CLI's table has."""
-    staged = any(row["summary"].get("stage_mean") is not None for row in rows)
+    staged = any_staged(row["summary"] for row in rows)
     lines = [
         "| checkpoint | env | kwargs | episodes (seeds) | success_once | success_at_end | return |" + (" stage |" if staged else "") + " manifest |",
         "|---|---|---|---|---|---|---|" + ("---|" if staged else "") + "---|",
@@ -62,7 +62,7 @@ def markdown_table(rows: list[dict]) -> str:
         s = row["summary"]
         kwargs = condition_label(row["kwargs"])
         seeds = f"{s['episodes']} ({row['seeds'][0]}-{row['seeds'][-1]})"
-        stage = (" - |" if s.get("stage_mean") is None else f" {s['stage_mean']:.2f} |") if staged else ""
+        stage = f" {stage_cell(s)} |" if staged else ""
         lines.append(
             f"| {row['name']} | {row['env_id']} | {kwargs} | {seeds} | {format_rate(s['success_once'], s['success_once_ci95'], decimals=0)} "
             f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'], decimals=0)} | {s['return_mean']:.2f} |{stage} {100 * row['manifest_success_at_end']:.0f}% |"

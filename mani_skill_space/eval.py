@@ -42,7 +42,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
-from mani_skill_space.metrics import EpisodeResult, format_rate, summarize
+from mani_skill_space.metrics import EpisodeResult, any_staged, format_rate, stage_cell, summarize
 from mani_skill_space.policies import load_policy
 from mani_skill_space.protocol import Protocol, heat_map, load_protocol, markdown_matrix, matrix_row, protocol_suite
 from mani_skill_space.rollout import evaluation_env_kwargs, run_episode
@@ -211,7 +211,7 @@ def _report(suite: Suite, policies: tuple[str, ...], results: dict) -> dict:
 
 def markdown_table(report: dict) -> str:
     """The report as a table; staged tasks (rows with a ``stage_mean``) add a column with the mean highest stage."""
-    staged = any(row["summary"].get("stage_mean") is not None for row in report["rows"])
+    staged = any_staged(row["summary"] for row in report["rows"])
     stage_header = (" stage |", "---|") if staged else ("", "")
     lines = [
         f"Suite `{report['suite']}`: success rates with 95% Wilson intervals.",
@@ -226,7 +226,7 @@ def markdown_table(report: dict) -> str:
             f"| {format_rate(s['success_at_end'], s['success_at_end_ci95'])} | {s['return_mean']:.2f} | {s['episode_len_mean']:.1f} |"
         )
         if staged:
-            line += " - |" if s.get("stage_mean") is None else f" {s['stage_mean']:.2f} |"
+            line += f" {stage_cell(s)} |"
         lines.append(line)
     return "\n".join(lines)
 

@@ -45,6 +45,16 @@ def format_rate(rate: float, interval, decimals: int = 1) -> str:
     return f"{100 * rate:.{decimals}f}% [{100 * interval[0]:.{decimals}f}, {100 * interval[1]:.{decimals}f}]"
 
 
+def any_staged(summaries) -> bool:
+    """Whether any of these summaries has a mean stage (a staged task's): result tables then add a stage column."""
+    return any(summary.get("stage_mean") is not None for summary in summaries)
+
+
+def stage_cell(summary: dict) -> str:
+    """A summary's cell of the stage column: its mean highest stage, or ``-`` where its env reports no stage."""
+    return "-" if summary.get("stage_mean") is None else f"{summary['stage_mean']:.2f}"
+
+
 def summarize(results: list[EpisodeResult]) -> dict:
     n = len(results)
     once = sum(r.success_once for r in results)
