@@ -333,6 +333,9 @@ class _ArmsOverTheHole:
     def screw_limit_margin(self, start, pose):
         return self.margins[float(start[0])]
 
+    def joint_move_end(self, start, goal):
+        return goal
+
 
 @pytest.mark.parametrize(
     "margins, chosen",
@@ -343,11 +346,11 @@ class _ArmsOverTheHole:
     ],
 )
 def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter, margins, chosen):
-    from mani_skill_space.oracles.insertion import PegInserter
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
 
     arms = [np.full(7, float(i)) for i in range(len(margins))]
     planner = PegInserter.__new__(PegInserter)
-    planner.oracle, planner.planned_arm = _ArmsOverTheHole(list(zip(arms, margins))), None
+    planner.oracle, planner.planned_arm, planner.settings = _ArmsOverTheHole(list(zip(arms, margins))), None, InsertionSettings()
     target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
     found = planner._insertion_arm(target, 0.0, np.eye(4))
     if chosen is None:
@@ -360,6 +363,40 @@ def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter
     found = planner._insertion_arm(target, 0.0, np.eye(4))
     first = next((i for i, margin in enumerate(margins) if margin is not None), None)
     assert (found is None) if first is None else np.array_equal(found[0], arms[first])
+    # ...unless its settings ask it to keep the margin there too (Solar Panel Assembly's)
+    planner.settings = InsertionSettings(push_margin_under_tcp_control=True)
+    found = planner._insertion_arm(target, 0.0, np.eye(4))
+    assert (found is None) if chosen is None else np.array_equal(found[0], arms[chosen])
+
+
+class _ArmsLeftElsewhere(_ArmsOverTheHole):
+    """...whose joint move to arm ``i`` leaves the arm at ``left[i]`` (None: the move stalls), as a TCP controller may."""
+
+    def __init__(self, arms_and_margins, left):
+        super().__init__(arms_and_margins)
+        self.left = {float(arm[0]): end for arm, end in zip(self.arms, left)}
+
+    def joint_move_end(self, start, goal):
+        return self.left[float(goal[0])]
+
+
+def test_the_push_is_planned_from_where_the_move_over_the_hole_leaves_the_arm(inserter):
+    """Arm 0's push keeps the margin, but the move there leaves the arm where the push does not (arm 2's
+    configuration); the move to arm 1 stalls; the move to arm 2 leaves the arm at arm 3's configuration, whose push
+    keeps the margin: arm 2 is the one to move to."""
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    arms = [np.full(7, float(i)) for i in range(4)]
+    planner = PegInserter.__new__(PegInserter)
+    oracle = _ArmsLeftElsewhere(list(zip(arms, (0.3, 0.3, 0.05, 0.3))), left=(arms[2], None, arms[3], arms[3]))
+    oracle.arms = arms[:3]
+    planner.oracle, planner.planned_arm, planner.settings = oracle, None, InsertionSettings()
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
+    found = planner._insertion_arm(target, 0.0, np.eye(4), start=np.zeros(7))
+    np.testing.assert_array_equal(found[0], arms[2])
+    assert found[1] == 0.3
+    # without a start (planning ahead, no move to follow) the arms' own margins count
+    np.testing.assert_array_equal(planner._insertion_arm(target, 0.0, np.eye(4))[0], arms[0])
 
 
 def test_a_screw_motions_joint_limit_margin_is_its_least_along_the_way(inserter):

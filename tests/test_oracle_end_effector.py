@@ -104,3 +104,35 @@ def test_the_oracle_solves_every_task_in_ee_delta_pose(env_id, domain, asset_sou
     result = run_episode(env, oracle_for(env_id, "pd_ee_delta_pose"), seed)
     assert result.success_once and result.success_at_end, (env_id, domain, asset_source, seed, result.failure)
     env.close()
+
+
+def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_env):
+    """A TCP controller follows the hand's poses along a joint move but settles the arm's redundancy its own way: the
+    oracle predicts the joints it ends in (``Oracle.joint_move_end``), which are not the move's goal."""
+    env = ee_env.unwrapped
+    env.reset(seed=0)
+    policy = EndEffectorDeltaPose(oracle_for("PegInHoleAssembly-v1"))
+    policy.reset(ee_env, 0)
+    oracle = policy.oracle
+    oracle.make_solver(env)
+    start = oracle.arm_qpos()
+    goal = start + np.array([0.9, 0.3, -0.9, 0.3, 0.9, 0.5, -0.6])
+    predicted = oracle.joint_move_end(start, goal)
+    with oracle._speed(1.0):
+        path = oracle.paced(oracle._timed_path(start, goal))
+    for target in np.concatenate([path, np.repeat(path[-1:], 10, axis=0)]):
+        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
+        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+    reached = oracle.arm_qpos()
+    assert np.abs(reached - goal).max() > 0.3  # the arm did not end at the move's goal...
+    np.testing.assert_allclose(reached, predicted, atol=0.05)  # ...but where the prediction said
+    np.testing.assert_allclose(oracle._tcp_poses([reached])[0], oracle._tcp_poses([goal])[0], atol=0.005)
+
+
+def test_the_solar_panel_oracle_fills_three_sockets_in_ee_delta_pose():
+    """Solar Panel Assembly's four pegs and panel do not fit its 1000 steps in this mode, but no push stalls (seed 0
+    filled one socket before ``Oracle.joint_move_end``: the second push stalled at a joint limit)."""
+    env = gym.make("SolarPanelAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", render_backend="none")
+    result = run_episode(env, oracle_for("SolarPanelAssembly-v1", "pd_ee_delta_pose"), 0)
+    assert result.stage >= 3, result.failure
+    env.close()

@@ -67,6 +67,11 @@ class Oracle(Policy):
     """(metres, radians): where set (and no ``tcp_pace``), a motion whose TCP would move or turn farther than this in
     a control step is slowed there to this (and nowhere else): the end-effector controller clips each step's delta
     to its own limits, so an oracle acting through it plans within them (``oracles.end_effector`` sets it)."""
+    arm_follower: Optional[Callable[[np.ndarray, np.ndarray], Optional[np.ndarray]]] = None
+    """Where set (``oracles.end_effector`` sets it), the arm joints in which the controller leaves the arm when it is sent a
+    joint path (arm joints at each step) from a start (``(start, path)``; None where it stalls): a TCP controller follows
+    the hand's pose, not the joints, and its IK, re-solved from the joints as they are, settles the arm's redundancy
+    its own way (``joint_move_end``)."""
     path_check_step: Optional[float] = None
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
@@ -251,6 +256,18 @@ class Oracle(Policy):
         with self._speed(1.0, acceleration):
             path = self._timed_path(start, goal)
         yield from self._follow(path)
+
+    def joint_move_end(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where ``joint_move(goal)`` from ``start`` leaves the arm: ``goal``, unless the oracle acts through a TCP
+        controller (``arm_follower``), whose IK takes the hand along the same poses but may end with the elbow and wrist
+        elsewhere (traced on Solar Panel Assembly, Moon, seed 0: the swing over the first socket planned to end with the
+        wrist's joint 1.9 rad from its upper limit ended at the limit, and the push from there stalled); None where the
+        controller would stall on the way."""
+        if self.arm_follower is None:
+            return goal
+        with self._speed(1.0, acceleration):
+            path = self._timed_path(start, goal)
+        return self.arm_follower(start, self._slowed_to_speed_limit(path, start))
 
     def straight_move_duration(self, start: np.ndarray, goal: np.ndarray) -> float:
         """Seconds the straight joint-space move from ``start`` to ``goal`` takes at the least: its slowest joint
@@ -459,10 +476,11 @@ class Oracle(Policy):
             return self._slowed_to_speed_limit(positions)
         return positions
 
-    def _slowed_to_speed_limit(self, positions: np.ndarray) -> np.ndarray:
-        """``positions`` resampled along the same path with every step that would move the TCP farther than
-        ``tcp_speed_limit`` stretched to as many steps as the limit needs (the other steps keep their timing)."""
-        path = np.concatenate([self.arm_qpos()[None], positions])
+    def _slowed_to_speed_limit(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
+        """``positions`` (from ``start``, the arm's joints now by default) resampled along the same path with every step
+        that would move the TCP farther than ``tcp_speed_limit`` stretched to as many steps as the limit needs (the
+        other steps keep their timing)."""
+        path = np.concatenate([(self.arm_qpos() if start is None else np.asarray(start))[None], positions])
         durations = np.maximum(1.0, self._paces(*self._tcp_poses(path), pace=self.tcp_speed_limit))
         times = np.concatenate([[0.0], np.cumsum(durations)])
         if times[-1] <= len(positions) + 1e-9:  # nothing to slow

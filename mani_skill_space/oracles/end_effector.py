@@ -7,15 +7,23 @@ delta that moves the TCP from where it is now to that pose. The controller adds 
 and solves IK from the current joints, so its joint target is the oracle's (up to the arm's redundancy), the loop is
 closed at every step and nothing is stretched in time: a timed motion such as a debris capture keeps its timing,
 which ManiSkill's conversion of recorded joint actions (extra steps where the delta would be clipped) cannot.
+
+The arm's redundancy is the controller's to settle: its IK, re-solved from the joints as they are at every step,
+takes the hand along the poses of a long joint-space swing but can end it with the elbow and wrist a radian or more
+from the swing's goal. The oracle plans what comes after a swing from where the controller will leave the arm
+(``EndEffectorDeltaPose.followed_end``, the controller's own IK stepped along the swing; ``Oracle.joint_move_end``).
 """
 
 from __future__ import annotations
+
+from typing import Optional
 
 import numpy as np
 import torch
 from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
 from mani_skill.utils.geometry.rotation_conversions import matrix_to_euler_angles, quaternion_to_matrix
 from mani_skill.utils.gym_utils import inv_scale_action
+from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.oracles.base import Oracle
 from mani_skill_space.policy import WrapsOracle
@@ -41,6 +49,7 @@ class EndEffectorDeltaPose(WrapsOracle):
         self.controller = arm_delta_controller(env.unwrapped)
         self.model = self.controller.articulation.create_pinocchio_model()
         self.oracle.tcp_speed_limit = speed_limit(self.controller)
+        self.oracle.arm_follower = self.followed_end
         self.oracle.reset(env, seed)
 
     def act(self, obs) -> np.ndarray:
@@ -48,6 +57,22 @@ class EndEffectorDeltaPose(WrapsOracle):
         arm_target, gripper = joint_action[:-1], joint_action[-1:]
         arm_action = delta_action_to(self.controller, self.tcp_pose_at_base(arm_target))
         return np.concatenate([arm_action, gripper]).astype(np.float32)
+
+    def followed_end(self, start: np.ndarray, path: np.ndarray) -> Optional[np.ndarray]:
+        """The arm joints in which the controller leaves the arm when ``act`` is given the joint targets ``path`` (one
+        per step) from ``start``: at each step the controller's own IK, from the joints it reached, for the TCP pose
+        the target puts the hand in (the arm taken to keep up with its targets); None if the IK fails at a step (the
+        controller then holds the arm where it is: the motion stalls)."""
+        qpos = self.controller.articulation.get_qpos().clone()
+        arm = self.controller.active_joint_indices
+        qpos[0, arm] = torch.as_tensor(np.asarray(start), dtype=qpos.dtype)
+        for target in path:
+            position, quaternion = self.tcp_pose_at_base(target)
+            solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(position, quaternion), q0=qpos)
+            if solved is None:
+                return None
+            qpos[0, arm] = solved[0].to(qpos.dtype)
+        return qpos[0, arm].cpu().numpy().astype(np.float64)
 
     def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm

@@ -105,7 +105,8 @@ PUSH_JOINT_MARGIN = 0.15
 """rad: a push planned this close to a joint limit (anywhere along it) is taken only where no other is feasible: the
 servo's IK, re-solved from the joints as they are, finds no solution past a limit and the push stalls (traced on
 seeds 2000-2049, e.g. orbit 2049: the push stopped 2 mm short of the bottom with nothing touching, the shoulder at
-full stretch). Not for an oracle acting in ``pd_ee_delta_pose`` (``PegInserter.push_joint_margin``)."""
+full stretch). An oracle acting in ``pd_ee_delta_pose`` measures it where the controller will have left the arm
+(``Oracle.joint_move_end``), and keeps it only where its settings ask (``PegInserter.push_joint_margin``)."""
 SURFACE_CLEARANCE = 0.001
 """m: the fingers closed on a peg pressed home must stay this far above the level surface round the entrance."""
 PUSH_LEAD = 0.005
@@ -163,6 +164,9 @@ class InsertionSettings:
     pre_grasp_acceleration: float = 1.0
     """Joint accelerations, as a multiple of the oracle's usual ones, of the empty hand's motion to the pre-grasp
     pose."""
+    push_margin_under_tcp_control: bool = False
+    """Whether an oracle acting through a TCP controller (``pd_ee_delta_pose``) also prefers pushes that keep
+    ``PUSH_JOINT_MARGIN`` from the joint limits (``PegInserter.push_joint_margin``)."""
 
 
 class PegInserter:
@@ -182,10 +186,14 @@ class PegInserter:
 
     @property
     def push_joint_margin(self) -> float:
-        """``PUSH_JOINT_MARGIN``, or none for an oracle whose TCP speed is limited (acting in ``pd_ee_delta_pose``): there
-        a push clear of the limits often comes with a grasp that the hand must turn farther to reach, which costs
-        time the episode does not have (the profile peg, Moon, seeds 6000-6049: 92% with the margin, 100% without)."""
-        return PUSH_JOINT_MARGIN if self.oracle.tcp_speed_limit is None else -np.inf
+        """``PUSH_JOINT_MARGIN``, or none for an oracle whose TCP speed is limited (acting in ``pd_ee_delta_pose``) unless
+        its settings ask for it (``push_margin_under_tcp_control``): there a push clear of the limits often comes with a
+        grasp that the hand must turn farther to reach, which costs time a single peg's episode does not have
+        (procedural pegs, Moon, seeds 6000-6049: 56% with the margin, 64% without; the profile peg 92% and 100% before
+        ``Oracle.joint_move_end``), while a Solar Panel push that stalls leaves a peg unseated and ends the plan."""
+        if self.oracle.tcp_speed_limit is None or self.settings.push_margin_under_tcp_control:
+            return PUSH_JOINT_MARGIN
+        return -np.inf
 
     def _reaching(self):
         """Plan with the ``reach_obstacles`` too, inside the block."""
@@ -382,7 +390,8 @@ class PegInserter:
         """An arm configuration holding the tip ``approach_gap`` over the hole on its axis (with ``tip_in_hand``) from which a
         straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it,
         with the push's least joint-limit margin: the first whose push keeps ``PUSH_JOINT_MARGIN`` from the limits, else the
-        one whose push keeps farthest from them; None if there is none."""
+        one whose push keeps farthest from them; None if there is none. Given ``start``, the push is planned from where the
+        move really leaves the arm (``Oracle.joint_move_end``: under a TCP controller, not the configuration moved to)."""
         bottom, depth = target.bottom, target.depth
         hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
         pressed = hand(push_to)
@@ -394,7 +403,10 @@ class PegInserter:
         best = None
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             for arm in arms:
-                margin = self.oracle.screw_limit_margin(arm, pressed)
+                reached = arm if start is None else self.oracle.joint_move_end(start, arm)
+                if reached is None:
+                    continue
+                margin = self.oracle.screw_limit_margin(reached, pressed)
                 if margin is None:
                     continue
                 if margin >= self.push_joint_margin:
