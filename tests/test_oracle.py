@@ -333,9 +333,6 @@ class _ArmsOverTheHole:
     def screw_limit_margin(self, start, pose):
         return self.margins[float(start[0])]
 
-    def joint_move_end(self, start, goal):
-        return goal
-
 
 @pytest.mark.parametrize(
     "margins, chosen",

@@ -118,15 +118,15 @@ def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_
     start = oracle.arm_qpos()
     goal = start + np.array([0.9, 0.3, -0.9, 0.3, 0.9, 0.5, -0.6])
     predicted = oracle.joint_move_end(start, goal)
-    with oracle._speed(1.0):
-        path = oracle.paced(oracle._timed_path(start, goal))
-    for target in np.concatenate([path, np.repeat(path[-1:], 10, axis=0)]):
+    targets = [action[:-1] for action in oracle.joint_move(goal, "swing")]
+    for target in targets + targets[-1:] * 10:
         arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
         ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
-    reached = oracle.arm_qpos()
+    reached = oracle.arm_qpos().copy()
     assert np.abs(reached - goal).max() > 0.3  # the arm did not end at the move's goal...
     np.testing.assert_allclose(reached, predicted, atol=0.05)  # ...but where the prediction said
     np.testing.assert_allclose(oracle._tcp_poses([reached])[0], oracle._tcp_poses([goal])[0], atol=0.005)
+    env.reset(seed=0)
 
 
 def test_the_solar_panel_oracle_fills_three_sockets_in_ee_delta_pose():

@@ -260,14 +260,14 @@ class Oracle(Policy):
     def joint_move_end(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where ``joint_move(goal)`` from ``start`` leaves the arm: ``goal``, unless the oracle acts through a TCP
         controller (``arm_follower``), whose IK takes the hand along the same poses but may end with the elbow and wrist
-        elsewhere (traced on Solar Panel Assembly, Moon, seed 0: the swing over the first socket planned to end with the
-        wrist's joint 1.9 rad from its upper limit ended at the limit, and the push from there stalled); None where the
-        controller would stall on the way."""
+        elsewhere (traced on Solar Panel Assembly, Moon, seed 0: the swing over the first socket, planned to end with the
+        wrist's joint at 3.11 rad, 0.64 from its upper limit, ended at the limit, and the line-up from there knocked the
+        peg out of the fingers); None where the controller would stall short of it."""
         if self.arm_follower is None:
             return goal
         with self._speed(1.0, acceleration):
             path = self._timed_path(start, goal)
-        return self.arm_follower(start, self._slowed_to_speed_limit(path, start))
+        return self.arm_follower(start, self.paced(path, start))
 
     def straight_move_duration(self, start: np.ndarray, goal: np.ndarray) -> float:
         """Seconds the straight joint-space move from ``start`` to ``goal`` takes at the least: its slowest joint
@@ -467,13 +467,14 @@ class Oracle(Policy):
         for qpos in positions:
             yield np.hstack([qpos, self.gripper]).astype(np.float32)
 
-    def paced(self, positions: np.ndarray) -> np.ndarray:
-        """``positions`` (a joint path from the arm's joints now, one target per control step) as the oracle sends
-        them: retimed to ``tcp_pace`` where set, else slowed where the TCP would outrun ``tcp_speed_limit``."""
+    def paced(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
+        """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step) as
+        the oracle sends them: retimed to ``tcp_pace`` where set, else slowed where the TCP would outrun
+        ``tcp_speed_limit``."""
         if self.tcp_pace is not None:
-            return self._retimed_to_tcp_pace(positions)
+            return self._retimed_to_tcp_pace(positions, start)
         if self.tcp_speed_limit is not None:
-            return self._slowed_to_speed_limit(positions)
+            return self._slowed_to_speed_limit(positions, start)
         return positions
 
     def _slowed_to_speed_limit(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
@@ -488,11 +489,11 @@ class Oracle(Policy):
         steps = np.linspace(0.0, times[-1], int(np.ceil(times[-1] - 1e-9)) + 1)[1:]
         return np.stack([np.interp(steps, times, path[:, joint]) for joint in range(path.shape[1])], axis=1)
 
-    def _retimed_to_tcp_pace(self, positions: np.ndarray) -> np.ndarray:
-        """``positions`` (a joint path, one target per control step) resampled along the same path so that the TCP
-        moves at ``tcp_pace``, reaching it in ``TCP_RAMP_STEPS`` steps and slowing down as long at the end (a
-        jolt would fling a held object)."""
-        path = np.concatenate([self.arm_qpos()[None], positions])
+    def _retimed_to_tcp_pace(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
+        """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step)
+        resampled along the same path so that the TCP moves at ``tcp_pace``, reaching it in ``TCP_RAMP_STEPS`` steps and
+        slowing down as long at the end (a jolt would fling a held object)."""
+        path = np.concatenate([(self.arm_qpos() if start is None else np.asarray(start))[None], positions])
         progress = np.concatenate([[0.0], np.cumsum(self._paces(*self._tcp_poses(path)))])
         if progress[-1] < 1e-6:
             return positions

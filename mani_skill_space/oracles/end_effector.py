@@ -37,6 +37,11 @@ step's motion plus the arm's lag behind its previous target, and the Panda's joi
 together at a third of them. (At half of them the wrist fell further behind at every clipped step of a fast turn.)"""
 
 
+FOLLOW_TOLERANCE = (0.005, 0.05)
+"""(m, rad): how close to a motion's last pose the controller must bring the hand for the motion to count as followed
+(``EndEffectorDeltaPose.followed_end``)."""
+
+
 class EndEffectorDeltaPose(WrapsOracle):
     """``oracle`` acting in ``pd_ee_delta_pose`` (see the module docstring)."""
 
@@ -60,19 +65,21 @@ class EndEffectorDeltaPose(WrapsOracle):
 
     def followed_end(self, start: np.ndarray, path: np.ndarray) -> Optional[np.ndarray]:
         """The arm joints in which the controller leaves the arm when ``act`` is given the joint targets ``path`` (one
-        per step) from ``start``: at each step the controller's own IK, from the joints it reached, for the TCP pose
-        the target puts the hand in (the arm taken to keep up with its targets); None if the IK fails at a step (the
-        controller then holds the arm where it is: the motion stalls)."""
-        qpos = self.controller.articulation.get_qpos().clone()
+        per step) from ``start``, the arm taken to keep up with its targets: at each step the controller's own IK
+        (CPU, ``compute_ik``), from the joints reached, for the TCP pose the target puts the hand in, the joints stopped
+        at their limits (the IK does not know them; where it fails, the controller holds the arm for that step). None if
+        the hand does not end at the path's last pose (``FOLLOW_TOLERANCE``): the motion stalls short of it."""
+        articulation = self.controller.articulation
         arm = self.controller.active_joint_indices
+        low, high = articulation.get_qlimits()[0, arm].T
+        qpos = articulation.get_qpos().clone()
         qpos[0, arm] = torch.as_tensor(np.asarray(start), dtype=qpos.dtype)
         for target in path:
-            position, quaternion = self.tcp_pose_at_base(target)
-            solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(position, quaternion), q0=qpos)
-            if solved is None:
-                return None
-            qpos[0, arm] = solved[0].to(qpos.dtype)
-        return qpos[0, arm].cpu().numpy().astype(np.float64)
+            solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(*self.tcp_pose_at_base(target)), q0=qpos)
+            if solved is not None:
+                qpos[0, arm] = torch.clamp(solved[0].to(qpos.dtype), low, high)
+        end = qpos[0, arm].cpu().numpy().astype(np.float64)
+        return end if _poses_within(self.tcp_pose_at_base(end), self.tcp_pose_at_base(path[-1]), FOLLOW_TOLERANCE) else None
 
     def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm
@@ -124,3 +131,9 @@ def delta_action_to(controller: PDEEPoseController, target: tuple[np.ndarray, np
     if norm > 1.0:
         rotation_action = rotation_action / norm
     return np.concatenate([position_action, rotation_action])
+
+
+def _poses_within(pose: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray], tolerance: tuple[float, float]) -> bool:
+    """Whether two (position, wxyz quaternion) poses are within ``tolerance`` (metres, radians) of each other."""
+    turn = 2.0 * np.arccos(min(1.0, abs(float(np.dot(pose[1], other[1])))))
+    return bool(np.linalg.norm(pose[0] - other[0]) <= tolerance[0] and turn <= tolerance[1])

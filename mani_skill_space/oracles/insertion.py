@@ -105,8 +105,9 @@ PUSH_JOINT_MARGIN = 0.15
 """rad: a push planned this close to a joint limit (anywhere along it) is taken only where no other is feasible: the
 servo's IK, re-solved from the joints as they are, finds no solution past a limit and the push stalls (traced on
 seeds 2000-2049, e.g. orbit 2049: the push stopped 2 mm short of the bottom with nothing touching, the shoulder at
-full stretch). An oracle acting in ``pd_ee_delta_pose`` measures it where the controller will have left the arm
-(``Oracle.joint_move_end``), and keeps it only where its settings ask (``PegInserter.push_joint_margin``)."""
+full stretch). The push is measured from where the move over the hole leaves the arm: in ``pd_ee_delta_pose`` not the
+configuration moved to (``Oracle.joint_move_end``); there the margin is kept only where the insertion's settings ask
+(``PegInserter.push_joint_margin``)."""
 SURFACE_CLEARANCE = 0.001
 """m: the fingers closed on a peg pressed home must stay this far above the level surface round the entrance."""
 PUSH_LEAD = 0.005
