@@ -190,8 +190,9 @@ class PegInserter:
         """``PUSH_JOINT_MARGIN``, or none for an oracle whose TCP speed is limited (acting in ``pd_ee_delta_pose``) unless
         its settings ask for it (``push_margin_under_tcp_control``): there a push clear of the limits often comes with a
         grasp that the hand must turn farther to reach, which costs time a single peg's episode does not have
-        (procedural pegs, Moon, seeds 6000-6049: 56% with the margin, 64% without; the profile peg 92% and 100% before
-        ``Oracle.joint_move_end``), while a Solar Panel push that stalls leaves a peg unseated and ends the plan."""
+        (procedural pegs, Moon, seeds 6000-6049, in a probe: 56% with the margin, 64% without; the profile peg 92% and
+        100% before ``Oracle.joint_move_end``), while a Solar Panel push that stalls leaves a peg unseated and ends the
+        plan."""
         if self.oracle.tcp_speed_limit is None or self.settings.push_margin_under_tcp_control:
             return PUSH_JOINT_MARGIN
         return -np.inf
