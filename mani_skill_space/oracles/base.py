@@ -253,9 +253,12 @@ class Oracle(Policy):
         start = self.arm_qpos()
         if not self.path_is_free(start, goal):
             raise PlanningFailed(f"the joint-space move to the {what} pose collides")
+        yield from self._follow(self._joint_move_path(start, goal, acceleration), retime=False)
+
+    def _joint_move_path(self, start: np.ndarray, goal: np.ndarray, acceleration: float) -> np.ndarray:
+        """The joint targets ``joint_move`` sends, one per control step, for its move from ``start`` to ``goal``."""
         with self._speed(1.0, acceleration):
-            path = self._timed_path(start, goal)
-        yield from self._follow(path)
+            return self.paced(self._timed_path(start, goal), start)
 
     def joint_move_end(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where ``joint_move(goal)`` from ``start`` leaves the arm: ``goal``, unless the oracle acts through a TCP
@@ -265,9 +268,7 @@ class Oracle(Policy):
         peg out of the fingers); None where the controller would stall short of it."""
         if self.arm_follower is None:
             return goal
-        with self._speed(1.0, acceleration):
-            path = self._timed_path(start, goal)
-        return self.arm_follower(start, self.paced(path, start))
+        return self.arm_follower(start, self._joint_move_path(start, goal, acceleration))
 
     def straight_move_duration(self, start: np.ndarray, goal: np.ndarray) -> float:
         """Seconds the straight joint-space move from ``start`` to ``goal`` takes at the least: its slowest joint
@@ -471,17 +472,18 @@ class Oracle(Policy):
         """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step) as
         the oracle sends them: retimed to ``tcp_pace`` where set, else slowed where the TCP would outrun
         ``tcp_speed_limit``."""
+        start = self.arm_qpos() if start is None else np.asarray(start)
         if self.tcp_pace is not None:
             return self._retimed_to_tcp_pace(positions, start)
         if self.tcp_speed_limit is not None:
             return self._slowed_to_speed_limit(positions, start)
         return positions
 
-    def _slowed_to_speed_limit(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
-        """``positions`` (from ``start``, the arm's joints now by default) resampled along the same path with every step
+    def _slowed_to_speed_limit(self, positions: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """``positions`` (from ``start``) resampled along the same path with every step
         that would move the TCP farther than ``tcp_speed_limit`` stretched to as many steps as the limit needs (the
         other steps keep their timing)."""
-        path = np.concatenate([(self.arm_qpos() if start is None else np.asarray(start))[None], positions])
+        path = np.concatenate([start[None], positions])
         durations = np.maximum(1.0, self._paces(*self._tcp_poses(path), pace=self.tcp_speed_limit))
         times = np.concatenate([[0.0], np.cumsum(durations)])
         if times[-1] <= len(positions) + 1e-9:  # nothing to slow
@@ -489,11 +491,11 @@ class Oracle(Policy):
         steps = np.linspace(0.0, times[-1], int(np.ceil(times[-1] - 1e-9)) + 1)[1:]
         return np.stack([np.interp(steps, times, path[:, joint]) for joint in range(path.shape[1])], axis=1)
 
-    def _retimed_to_tcp_pace(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
-        """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step)
+    def _retimed_to_tcp_pace(self, positions: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """``positions`` (a joint path from ``start``, one target per control step)
         resampled along the same path so that the TCP moves at ``tcp_pace``, reaching it in ``TCP_RAMP_STEPS`` steps and
         slowing down as long at the end (a jolt would fling a held object)."""
-        path = np.concatenate([(self.arm_qpos() if start is None else np.asarray(start))[None], positions])
+        path = np.concatenate([start[None], positions])
         progress = np.concatenate([[0.0], np.cumsum(self._paces(*self._tcp_poses(path)))])
         if progress[-1] < 1e-6:
             return positions

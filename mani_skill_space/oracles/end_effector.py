@@ -75,11 +75,12 @@ class EndEffectorDeltaPose(WrapsOracle):
         qpos = articulation.get_qpos().clone()
         qpos[0, arm] = torch.as_tensor(np.asarray(start), dtype=qpos.dtype)
         for target in path:
-            solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(*self.tcp_pose_at_base(target)), q0=qpos)
+            hand = self.tcp_pose_at_base(target)
+            solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(*hand), q0=qpos)
             if solved is not None:
                 qpos[0, arm] = torch.clamp(solved[0].to(qpos.dtype), low, high)
         end = qpos[0, arm].cpu().numpy().astype(np.float64)
-        return end if _poses_within(self.tcp_pose_at_base(end), self.tcp_pose_at_base(path[-1]), FOLLOW_TOLERANCE) else None
+        return end if _poses_within(self.tcp_pose_at_base(end), hand, FOLLOW_TOLERANCE) else None
 
     def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm
