@@ -318,12 +318,16 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             entrance_position, _ = relative_pose(tcp_position[:, None], tcp_rotation[:, None], entrance[..., :3, 3], entrance[..., :3, :3])
             handle = self.panel_handle()
             handle_position, handle_rotation = relative_pose(tcp_position, tcp_rotation, handle[:, :3, 3], handle[:, :3, :3])
+            socket_entrance, socket_bottom, socket_rotation = self._target_sockets_in_peg_ends(info)
             seat = self.panel_seat()
             target_position, target_rotation = relative_pose(seat[:, :3, 3], seat[:, :3, :3], self.panel_target[:, :3, 3], self.panel_target[:, :3, :3])
             obs.update(
                 pegs_pos_in_tcp=peg_position.reshape(n, -1),
                 pegs_rot6d_in_tcp=rotation_6d(peg_rotation).reshape(n, -1),
                 sockets_pos_in_tcp=entrance_position.reshape(n, -1),
+                target_entrances_in_peg_ends=socket_entrance.reshape(n, -1),
+                target_bottoms_in_peg_ends=socket_bottom.reshape(n, -1),
+                target_sockets_rot6d_in_peg_ends=rotation_6d(socket_rotation).reshape(n, -1),
                 peg_inserted=info["peg_inserted"].float(),
                 socket_depth=self.insertion.hole_depth[:, :1],
                 symmetry_order=self.insertion.symmetry_order[:, :1].float(),
@@ -333,6 +337,20 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
                 target_rot6d_in_seat=rotation_6d(target_rotation),
             )
         return obs
+
+    def _target_sockets_in_peg_ends(self, info: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """For each peg, its target socket (``target_sockets``) seen from the peg's end nearest that socket's
+        entrance, as Peg-in-Hole observes its hole: the entrance's and the bottom's positions (n, 4, 3) and the
+        socket's rotation (n, 4, 3, 3) in that end's frame."""
+        rows = torch.arange(self.num_envs, device=self.device)[:, None]
+        pegs = torch.arange(SOCKET_COUNT, device=self.device)[None]
+        target = self.target_sockets(info)
+        end = self.peg_end_frames()[rows, pegs, info["pair_peg_end"][rows, pegs, target]]
+        entrance = self.insertion.hole_entrance[rows, target]
+        bottom = self.insertion.hole_bottom[rows, target]
+        entrance_position, _ = relative_pose(end[..., :3, 3], end[..., :3, :3], entrance[..., :3, 3], entrance[..., :3, :3])
+        bottom_position, socket_rotation = relative_pose(end[..., :3, 3], end[..., :3, :3], bottom[..., :3, 3], bottom[..., :3, :3])
+        return entrance_position, bottom_position, socket_rotation
 
     # ------------------------------------------------------------------ reward
     def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:

@@ -6,6 +6,7 @@ import torch
 
 from mani_skill_space.envs import SolarPanelAssemblyEnv
 from mani_skill_space.envs.solar_panel_assembly import PANEL_START_XY, PEG_REST_XY, REWARD_TABLE
+from mani_skill_space.geometry import rotation_6d
 
 ENV_ID = "SolarPanelAssembly-v1"
 DOMAINS = SolarPanelAssemblyEnv.SUPPORTED_DOMAINS
@@ -172,6 +173,9 @@ def test_state_observations():
         ("pegs_pos_in_tcp", 12),
         ("pegs_rot6d_in_tcp", 24),
         ("sockets_pos_in_tcp", 12),
+        ("target_entrances_in_peg_ends", 12),
+        ("target_bottoms_in_peg_ends", 12),
+        ("target_sockets_rot6d_in_peg_ends", 24),
         ("socket_filled", 4),
         ("peg_inserted", 4),
         ("handle_pos_in_tcp", 3),
@@ -180,4 +184,23 @@ def test_state_observations():
         ("wrist_wrench", 6),
     ]:
         assert extra[key].shape == (1, size), key
+    env.close()
+
+
+def test_each_peg_observes_its_target_socket_from_its_end():
+    env = make(obs_mode="state_dict")
+    env.reset(seed=0)
+    u = env.unwrapped
+    _insert(env, 2, lift=0.05)  # peg 2 held on its socket's axis, its end 5 cm (and _insert's 0.1 mm) above the bottom
+    _insert(env, 0)  # peg 0 in its socket: it now targets the other long socket
+    extra = u.get_obs(u.get_info())["extra"]
+    bottoms = extra["target_bottoms_in_peg_ends"].reshape(4, 3)
+    entrances = extra["target_entrances_in_peg_ends"].reshape(4, 3)
+    rotations = extra["target_sockets_rot6d_in_peg_ends"].reshape(4, 6)
+    depth = u.insertion.hole_depth[0, 2].item()
+    assert torch.linalg.norm(bottoms[2]).item() == pytest.approx(0.0501, abs=1e-5)
+    assert torch.linalg.norm(entrances[2]).item() == pytest.approx(0.0501 - depth, abs=1e-5)
+    assert torch.allclose(rotations[2], rotation_6d(torch.eye(3)), atol=1e-4)
+    other_long_socket = u.insertion.hole_bottom[0, 1, :3, 3] - u.insertion.hole_bottom[0, 0, :3, 3]
+    assert torch.linalg.norm(bottoms[0]).item() == pytest.approx(torch.linalg.norm(other_long_socket).item(), abs=1e-3)
     env.close()
