@@ -41,7 +41,8 @@ import imageio.v2 as imageio
 import numpy as np
 from tqdm import tqdm
 
-from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cli, tyro_parser
+from mani_skill_space.cli_support import UserError, check_at_least, checking_inputs, one_line, run_cli, tyro_parser
+from mani_skill_space.learning.checkpoints import CheckpointError
 from mani_skill_space.metrics import EpisodeResult, any_staged, format_rate, stage_cell, summarize
 from mani_skill_space.policies import load_policy
 from mani_skill_space.protocol import Protocol, heat_map, load_protocol, markdown_matrix, matrix_row, protocol_suite
@@ -193,7 +194,11 @@ def evaluate(suite: Suite, args: Args) -> dict:
         with tqdm(total=sum(len(c.seeds) for c in chunks), desc=f"eval {suite.name}", unit="episode") as progress:
             for future in as_completed(futures):
                 chunk = futures[future]
-                results.setdefault((chunk.configuration.name, chunk.policy), []).extend(future.result())
+                try:
+                    episodes = future.result()
+                except CheckpointError as error:  # found once the env is made: a checkpoint from another version
+                    raise UserError(one_line(error)) from error
+                results.setdefault((chunk.configuration.name, chunk.policy), []).extend(episodes)
                 progress.update(len(chunk.seeds))
     return _report(suite, args.policy, results)
 

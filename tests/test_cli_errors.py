@@ -38,6 +38,18 @@ def _trajectory(tmp_path, env_id: str, env_kwargs: dict) -> str:
     return str(tmp_path / "demo.h5")
 
 
+def _stale_checkpoint(tmp_path) -> list[str]:
+    """A Sample Collection checkpoint that takes 5 state observations (trained on another version of the env), and a
+    one-episode suite of that env."""
+    from mani_skill_space.learning import BehaviourCloningPolicy, save_checkpoint
+
+    kwargs = dict(state_dim=5, action_dim=7, hidden=8, depth=1)
+    path = save_checkpoint(tmp_path / "stale.pt", "bc", BehaviourCloningPolicy(**kwargs), kwargs, "SampleCollection-v1", {"domain": "mars"}, "state", "pd_ee_delta_pose")
+    suite = tmp_path / "one.toml"
+    suite.write_text('name = "one"\nepisodes = 1\n\n[[configurations]]\nenv_id = "SampleCollection-v1"\nkwargs = { domain = "mars", asset_source = "dataset" }\n')
+    return ["--suite", str(suite), "--policy", f"checkpoint:{path}", "--num-workers", "1"]
+
+
 CASES = [
     ("eval", lambda t: ["--suite", "no_such_suite"], "unknown suite 'no_such_suite'; shipped suites: "),
     ("eval", lambda t: ["--suite", str(t / "missing.toml")], "missing.toml: no such suite file"),
@@ -46,6 +58,7 @@ CASES = [
     ("eval", lambda t: ["--suite", "smoke", "--policy", "dreamer"], "Unknown policy 'dreamer'; valid choices: random, zero, oracle"),
     ("eval", lambda t: ["--suite", "smoke", "--policy", "no_such_module:make"], "cannot import module 'no_such_module'"),
     ("eval", lambda t: ["--suite", "smoke", "--policy", "checkpoint:missing.pt"], "missing.pt"),
+    ("eval", _stale_checkpoint, "stale.pt takes 5 state observations and this version of SampleCollection-v1 gives "),
     ("eval", lambda t: ["--suite", "smoke", "--num-workers", "0"], "--num-workers must be at least 1, got 0"),
     ("eval", lambda t: ["--policy", "zero"], "give either --suite (a benchmark suite) or --protocol (a generalisation protocol)"),
     ("eval", lambda t: ["--protocol", "no_such_protocol"], "unknown protocol 'no_such_protocol'; shipped protocols: "),

@@ -107,6 +107,7 @@ class CheckpointPolicy(Policy):
     @torch.no_grad()
     def act(self, obs) -> torch.Tensor:
         encoded = encode_observation(obs, self.obs_mode, self.device)
+        self._check_state_size(encoded["state"].shape[-1])
         if self.diffusion is None:
             return self.model.act(encoded)
         state = encoded["state"]
@@ -117,6 +118,16 @@ class CheckpointPolicy(Policy):
             chunk = denoise(self.model, self.scheduler, torch.stack(list(self.history), dim=1), self.diffusion["inference_steps"], self.generator)
             self.queue.extend(chunk[:, i] for i in range(self.diffusion["execute_horizon"]))
         return self.queue.popleft()
+
+    def _check_state_size(self, size: int) -> None:
+        """A model trained on another version of the env's observations (a feature added since) is refused by
+        name rather than failing inside its first layer."""
+        trained = self.checkpoint["model_kwargs"]["state_dim"]
+        if size != trained:
+            raise CheckpointError(
+                f"{self.path} takes {trained} state observations and this version of {self.env_id} gives {size}: "
+                "it was trained on another version of the env's observations; train it again"
+            )
 
 
 class BestCheckpoint:
