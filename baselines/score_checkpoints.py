@@ -2,6 +2,7 @@
 
     python baselines/score_checkpoints.py                      # baselines/checkpoints/manifest.toml, every seed
     python baselines/score_checkpoints.py --episodes 2         # a quick check that each loads and runs
+    python baselines/score_checkpoints.py --only bc_solar_ee   # score one entry again, keep the others' rows
 
 Writes ``<output>.json`` and ``<output>.md`` (the README's baseline table: every checkpoint's success with 95% Wilson
 intervals next to the success its manifest entry records).
@@ -33,11 +34,18 @@ class Args:
     episodes: Optional[int] = None
     """Score only the first N of each entry's seeds."""
     num_workers: int = os.cpu_count() or 1
+    only: tuple[str, ...] = ()
+    """Score only these entries; every other entry keeps its row from the earlier ``<output>.json``."""
 
 
 def main(args: Args) -> list[dict]:
+    entries = load_manifest(args.manifest)
+    kept = earlier_rows(args, [entry.name for entry in entries])
     rows = []
-    for entry in load_manifest(args.manifest):
+    for entry in entries:
+        if entry.name in kept:
+            rows.append(kept[entry.name])
+            continue
         suite = Suite(entry.name, args.manifest, configurations=(Configuration(entry.name, entry.env_id, entry.kwargs, entry.episodes, entry.seed_start, line=0),))
         run_args = evaluation.Args(suite=args.manifest, policy=(entry.policy,), episodes=args.episodes, num_workers=args.num_workers)
         (row,) = evaluation.evaluate(suite, run_args)["rows"]
@@ -48,6 +56,21 @@ def main(args: Args) -> list[dict]:
     args.output.with_suffix(".md").write_text(table + "\n")
     print(table)
     return rows
+
+
+def earlier_rows(args: Args, names: list[str]) -> dict[str, dict]:
+    """The rows of the entries ``--only`` leaves out, from the earlier output (none without ``--only``)."""
+    if not args.only:
+        return {}
+    unknown = sorted(set(args.only) - set(names))
+    if unknown:
+        raise ValueError(f"--only names {unknown}, which {args.manifest} does not list; valid choices: {', '.join(names)}")
+    earlier_path = args.output.with_suffix(".json")
+    earlier = {row["name"]: row for row in json.loads(earlier_path.read_text())} if earlier_path.exists() else {}
+    missing = [name for name in names if name not in args.only and name not in earlier]
+    if missing:
+        raise ValueError(f"{earlier_path} has no rows for {missing}, which --only leaves out: score them too")
+    return {name: earlier[name] for name in names if name not in args.only}
 
 
 def markdown_table(rows: list[dict]) -> str:

@@ -2,6 +2,7 @@
 they stay small."""
 
 import importlib.util
+import json
 import sys
 import textwrap
 from pathlib import Path
@@ -38,6 +39,23 @@ def test_every_shipped_checkpoint_loads_and_runs_in_the_evaluation_cli(tmp_path)
     assert [row["name"] for row in rows] == [entry.name for entry in load_manifest(MANIFEST)]
     assert all(row["summary"]["episodes"] == 2 for row in rows)
     assert (tmp_path / "checkpoints.md").read_text().count("\n| ") == len(rows)  # the rows after the header
+
+
+def test_only_scores_the_named_entries_and_keeps_the_other_rows(manifest, tmp_path):
+    score = _script("score_checkpoints")
+    path = manifest(ENTRY + ENTRY.replace('name = "tiny"', 'name = "other"'))
+    output = tmp_path / "scores"
+    earlier = dict(name="other", env_id="SampleCollection-v1", kwargs={}, command="", manifest_success_at_end=0.5, seeds=[20000])
+    earlier["summary"] = dict(episodes=1, success_once=1.0, success_once_ci95=[0.2, 1.0], success_at_end=1.0, success_at_end_ci95=[0.2, 1.0], return_mean=9.0, stage_mean=None)
+    with pytest.raises(ValueError, match=r"has no rows for \['other'\], which --only leaves out"):
+        score.main(score.Args(manifest=path, output=output, episodes=1, num_workers=1, only=("tiny",)))
+    output.with_suffix(".json").write_text(json.dumps([earlier]))
+    with pytest.raises(ValueError, match=r"--only names \['tini'\].*valid choices: tiny, other"):
+        score.main(score.Args(manifest=path, output=output, episodes=1, num_workers=1, only=("tini",)))
+    rows = score.main(score.Args(manifest=path, output=output, episodes=1, num_workers=1, only=("tiny",)))
+    assert [row["name"] for row in rows] == ["tiny", "other"]
+    assert rows[0]["summary"]["episodes"] == 1 and rows[1] == earlier
+    assert json.loads(output.with_suffix(".json").read_text()) == json.loads(json.dumps(rows))
 
 
 def test_the_checkpoint_table_has_a_stage_column_only_where_an_env_is_staged():
