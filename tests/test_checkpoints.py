@@ -72,3 +72,12 @@ def test_the_crafted_file_really_runs_code_without_weights_only(tmp_path):
     torch.save({"payload": _RunsCode(marker)}, crafted)
     torch.load(crafted, weights_only=False)
     assert marker.exists()
+
+
+def test_observations_of_another_size_are_refused_by_name(tmp_path):
+    kwargs = dict(state_dim=5, action_dim=2, hidden=8, depth=1)
+    path = save_checkpoint(tmp_path / "stale.pt", "bc", BehaviourCloningPolicy(**kwargs), kwargs, "SampleCollection-v1", {}, "state", "pd_ee_delta_pose")
+    policy = CheckpointPolicy(str(path))
+    assert policy.act(torch.zeros(1, 5)).shape == (1, 2)
+    with pytest.raises(CheckpointError, match="stale.pt takes 5 state observations and this version of SampleCollection-v1 gives 6"):
+        policy.act(torch.zeros(1, 6))
