@@ -33,7 +33,7 @@ import torch
 from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 
 from mani_skill_space.envs.base import RestingPlacement, turned_about_z
-from mani_skill_space.geometry import insertion_measures, pose_matrix
+from mani_skill_space.geometry import insertion_measures, pose_matrix, relative_pose
 from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.rewards import RewardTerm, band_distance
 
@@ -329,3 +329,12 @@ def lying_peg_orientation(placement: RestingPlacement, env_idx: torch.Tensor, rn
     axis = quaternion_to_matrix(resting)[:, :, 2]
     heading = torch.as_tensor(rng.uniform(-PEG_HEADING_JITTER, PEG_HEADING_JITTER), dtype=torch.float32, device=resting.device)
     return turned_about_z(resting, heading - torch.atan2(axis[:, 1], axis[:, 0]))
+
+
+def hole_in_peg_end(end: torch.Tensor, entrance: torch.Tensor, bottom: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A hole as a peg's end sees it, given the world poses (..., 4, 4) of the end, the hole's entrance and its
+    bottom: the entrance's and the bottom's positions (..., 3) and the hole's rotation (..., 3, 3) in the end's frame."""
+    end_position, end_rotation = end[..., :3, 3], end[..., :3, :3]
+    entrance_position, _ = relative_pose(end_position, end_rotation, entrance[..., :3, 3], entrance[..., :3, :3])
+    bottom_position, hole_rotation = relative_pose(end_position, end_rotation, bottom[..., :3, 3], bottom[..., :3, :3])
+    return entrance_position, bottom_position, hole_rotation

@@ -17,6 +17,7 @@ from mani_skill_space.envs.insertion import (
     is_inserted,
     face_checks_of,
     feasibility_record,
+    hole_in_peg_end,
     insertable_faces,
     latch_force,
     lying_peg_orientation,
@@ -204,10 +205,7 @@ class PegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             peg = self.peg.pose
             position, rotation = relative_pose(tcp_position, tcp_rotation, peg.p, rotation_matrix(peg.q))
             end = _select(self.peg_end_frames()[:, 0], info["peg_end"])
-            end_position, end_rotation = end[:, :3, 3], end[:, :3, :3]
-            hole_entrance, hole_bottom = self.insertion.hole_entrance[:, 0], self.insertion.hole_bottom[:, 0]
-            entrance, _ = relative_pose(end_position, end_rotation, hole_entrance[:, :3, 3], hole_entrance[:, :3, :3])
-            bottom, hole_rotation = relative_pose(end_position, end_rotation, hole_bottom[:, :3, 3], hole_bottom[:, :3, :3])
+            entrance, bottom, hole_rotation = hole_in_peg_end(end, self.insertion.hole_entrance[:, 0], self.insertion.hole_bottom[:, 0])
             obs.update(
                 peg_pos_in_tcp=position,
                 peg_rot6d_in_tcp=rotation_6d(rotation),

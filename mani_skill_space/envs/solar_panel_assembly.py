@@ -21,6 +21,7 @@ from mani_skill_space.envs.insertion import (
     pegs_latched_in_holes,
     face_checks_of,
     feasibility_record,
+    hole_in_peg_end,
     insertable_faces,
     redrawn_seed,
     seated_pairs,
@@ -346,11 +347,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         pegs = torch.arange(SOCKET_COUNT, device=self.device)[None]
         target = self.target_sockets(info)
         end = self.peg_end_frames()[rows, pegs, info["pair_peg_end"][rows, pegs, target]]
-        entrance = self.insertion.hole_entrance[rows, target]
-        bottom = self.insertion.hole_bottom[rows, target]
-        entrance_position, _ = relative_pose(end[..., :3, 3], end[..., :3, :3], entrance[..., :3, 3], entrance[..., :3, :3])
-        bottom_position, socket_rotation = relative_pose(end[..., :3, 3], end[..., :3, :3], bottom[..., :3, 3], bottom[..., :3, :3])
-        return entrance_position, bottom_position, socket_rotation
+        return hole_in_peg_end(end, self.insertion.hole_entrance[rows, target], self.insertion.hole_bottom[rows, target])
 
     # ------------------------------------------------------------------ reward
     def _reward_inputs(self, info: dict) -> dict[str, torch.Tensor]:
