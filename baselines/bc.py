@@ -31,7 +31,10 @@ from mani_skill_space.learning import (
     CheckpointPolicy,
     LearningCurve,
     LrSchedule,
+    load_checkpoint,
     load_demonstrations,
+    load_labelled_states,
+    load_model,
     save_checkpoint,
     set_learning_rate,
     task_of_demonstrations,
@@ -49,6 +52,14 @@ class Args:
     """Learn from every demonstration in the file, not only the successful ones: for a task whose demonstrations end
     before success (Solar Panel Assembly's in ``pd_ee_delta_pose``: out of time, or stopped by a planning failure, with
     one to three of the four sockets filled), the part of the task they do show."""
+    labelled_states: tuple[Path, ...] = ()
+    """DAgger: states an expert labelled on a policy's own rollouts (``baselines/dagger.py``), learned from
+    together with the demonstrations (same env, obs and control mode)."""
+    labelled_share: Optional[float] = None
+    """Share of every batch drawn from ``--labelled-states`` (None: uniformly from all transitions)."""
+    init_checkpoint: Optional[Path] = None
+    """Start from this BC checkpoint (its network and observation normalisation) instead of from scratch, e.g. the
+    policy whose rollouts were labelled."""
     minutes: float = 20.0
     """Wall-clock training budget (evaluations included)."""
     max_iterations: int = 100_000
@@ -81,15 +92,21 @@ def main(args: Args) -> Path:
     env_id, env_kwargs, obs_mode, control_mode = task_of_demonstrations(env_info)
     obs = torch.as_tensor(np.concatenate([e["obs"][:-1] for e in episodes]))
     actions = torch.as_tensor(np.concatenate([e["actions"] for e in episodes]))
+    labelled_obs, labelled_actions = load_labelled(args, (env_id, env_kwargs, obs_mode, control_mode), obs.shape[1], actions.shape[1])
+    draw = batch_sampler(len(obs), len(labelled_obs), args.labelled_share, args.batch_size)
+    obs, actions = torch.cat([obs, labelled_obs]), torch.cat([actions, labelled_actions])
     run_dir = args.output_dir / (args.name or f"bc-{env_id}-{int(time.time())}")
-    model_kwargs = dict(state_dim=obs.shape[1], action_dim=actions.shape[1], hidden=args.hidden)
-    model = BehaviourCloningPolicy(**model_kwargs)
-    model.obs_mean.copy_(obs.mean(0))
-    model.obs_std.copy_(obs.std(0).clamp_min(1e-3))
+    if args.init_checkpoint is not None:
+        model, model_kwargs = initial_model(args.init_checkpoint, env_id, obs.shape[1])
+    else:
+        model_kwargs = dict(state_dim=obs.shape[1], action_dim=actions.shape[1], hidden=args.hidden)
+        model = BehaviourCloningPolicy(**model_kwargs)
+        model.obs_mean.copy_(obs.mean(0))
+        model.obs_std.copy_(obs.std(0).clamp_min(1e-3))
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     loss_weights = action_loss_weights(actions) if args.balance_action_loss else torch.ones(actions.shape[1])
     curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
-    print(f"{len(episodes)} demonstrations, {len(obs)} transitions of {env_id} {env_kwargs}; training in {run_dir}")
+    print(f"{len(episodes)} demonstrations and {len(labelled_obs)} labelled states, {len(obs)} transitions of {env_id} {env_kwargs}; training in {run_dir}")
 
     checkpoint = run_dir / "checkpoint.pt"
     best = BestCheckpoint(checkpoint)
@@ -98,7 +115,7 @@ def main(args: Args) -> Path:
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     progress = tqdm(range(1, args.max_iterations + 1), desc="bc")
     for iteration in progress:
-        batch = torch.randint(0, len(obs), (args.batch_size,))
+        batch = draw()
         inputs = obs[batch] + args.obs_noise * model.obs_std * torch.randn_like(obs[batch])
         loss = ((model(inputs) - actions[batch]).pow(2) * loss_weights).mean()
         set_learning_rate(optimiser, args, iteration, (time.time() - start) / 60)
@@ -120,6 +137,41 @@ def main(args: Args) -> Path:
     curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"BC on {env_id}")
     print(f"checkpoint: {checkpoint}" + (f", best in training evaluations: {best.path}" if best.score else ""))
     return checkpoint
+
+
+def load_labelled(args: Args, task: tuple, state_dim: int, action_dim: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The ``--labelled-states`` files' states and actions, checked to be of the demonstrations' task."""
+    observations, actions = [torch.zeros((0, state_dim))], [torch.zeros((0, action_dim))]
+    for path in args.labelled_states:
+        obs, labels, env_info = load_labelled_states(path)
+        if task_of_demonstrations(env_info) != task:
+            raise ValueError(f"{path} was labelled on {task_of_demonstrations(env_info)}, the demonstrations are of {task}")
+        if obs.shape[1] != state_dim or labels.shape[1] != action_dim:
+            raise ValueError(f"{path} has {obs.shape[1]} state and {labels.shape[1]} action dimensions, the demonstrations {state_dim} and {action_dim}")
+        observations.append(torch.as_tensor(obs))
+        actions.append(torch.as_tensor(labels))
+    return torch.cat(observations), torch.cat(actions)
+
+
+def batch_sampler(demonstrated: int, labelled: int, labelled_share: Optional[float], batch_size: int):
+    """Indices into the demonstrations' transitions followed by the labelled states: ``labelled_share`` of each
+    batch from the latter, or uniformly from both (None)."""
+    if labelled_share is None or not labelled:
+        return lambda: torch.randint(0, demonstrated + labelled, (batch_size,))
+    if not 0.0 < labelled_share < 1.0:
+        raise ValueError(f"--labelled-share must be within (0, 1), got {labelled_share}")
+    from_labelled = round(batch_size * labelled_share)
+    return lambda: torch.cat([torch.randint(0, demonstrated, (batch_size - from_labelled,)), demonstrated + torch.randint(0, labelled, (from_labelled,))])
+
+
+def initial_model(path: Path, env_id: str, state_dim: int) -> tuple[BehaviourCloningPolicy, dict]:
+    """``--init-checkpoint``'s network (trainable), checked to be a BC policy of this env and state size."""
+    checkpoint = load_checkpoint(path)
+    if checkpoint["algorithm"] != "bc" or checkpoint["env_id"] != env_id:
+        raise ValueError(f"--init-checkpoint {path} is {checkpoint['algorithm']} on {checkpoint['env_id']}; expected bc on {env_id}")
+    if checkpoint["model_kwargs"]["state_dim"] != state_dim:
+        raise ValueError(f"--init-checkpoint {path} takes {checkpoint['model_kwargs']['state_dim']} state dimensions, the demonstrations have {state_dim}")
+    return load_model(checkpoint).train(), dict(checkpoint["model_kwargs"])
 
 
 def action_loss_weights(actions: torch.Tensor) -> torch.Tensor:

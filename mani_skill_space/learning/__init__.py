@@ -6,7 +6,7 @@
   evaluation CLI runs for ``--policy checkpoint:PATH``; ``BestCheckpoint`` keeps the best one seen in training;
 - ``vector_env``: vectorised training envs (GPU-batched, or CPU worker processes);
 - ``curves``: learning curves (CSV and PNG);
-- ``demonstrations``: ManiSkill trajectory files as the imitation learners read them;
+- ``demonstrations``: ManiSkill trajectory files as the imitation learners read them (and DAgger's labelled states);
 - ``schedules``: the imitation learners' learning-rate schedules.
 
 Baselines evaluate during training with ``mani_skill_space.rollout.evaluate_policy``: the evaluation CLI's
@@ -15,7 +15,7 @@ protocol and code.
 
 from mani_skill_space.learning.checkpoints import BestCheckpoint, CheckpointError, CheckpointPolicy, load_checkpoint, load_model, save_checkpoint
 from mani_skill_space.learning.curves import LearningCurve
-from mani_skill_space.learning.demonstrations import RECORDING_KWARGS, load_demonstrations, task_of_demonstrations
+from mani_skill_space.learning.demonstrations import RECORDING_KWARGS, load_demonstrations, load_labelled_states, task_of_demonstrations
 from mani_skill_space.learning.networks import (
     MODELS,
     OBS_CLIP,
@@ -55,6 +55,7 @@ __all__ = [
     "encode_observation",
     "load_checkpoint",
     "load_demonstrations",
+    "load_labelled_states",
     "load_model",
     "mlp",
     "save_checkpoint",

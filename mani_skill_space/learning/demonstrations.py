@@ -42,6 +42,24 @@ def load_demonstrations(path: Path, success_only: bool = True, limit: Optional[i
     return episodes, meta["env_info"]
 
 
+def load_labelled_states(path: Path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """States labelled by an expert (``baselines/dagger.py``'s ``.h5`` + ``.json``): observations (N, d), the
+    expert's actions (N, a) and the env info (as a trajectory file's)."""
+    import json
+
+    import h5py
+
+    path = Path(path)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    with h5py.File(path, "r") as data:
+        if "obs" not in data or "actions" not in data:
+            raise ValueError(f"{path} holds no labelled states (datasets 'obs' and 'actions'); write it with baselines/dagger.py")
+        obs, actions = np.asarray(data["obs"], dtype=np.float32), np.asarray(data["actions"], dtype=np.float32)
+    if len(obs) != len(actions) or not len(obs):
+        raise ValueError(f"{path} holds {len(obs)} states and {len(actions)} actions; expected as many of each, at least one")
+    return obs, actions, meta["env_info"]
+
+
 RECORDING_KWARGS = RUN_KWARGS
 """Env kwargs a trajectory file records that belong to how it was recorded, not to the task."""
 
