@@ -39,7 +39,6 @@ from mani_skill_space.learning import (
     set_learning_rate,
     task_of_demonstrations,
 )
-from mani_skill_space.rollout import evaluate_policy
 
 
 @dataclass
@@ -84,6 +83,8 @@ class Args:
     output_dir: Path = Path("runs")
     name: Optional[str] = None
     seed: int = 0
+    device: str = "auto"
+    """``auto``: CUDA where torch finds it, else the CPU. Checkpoints are saved with CPU tensors either way."""
 
 
 def main(args: Args) -> Path:
@@ -103,10 +104,13 @@ def main(args: Args) -> Path:
         model = BehaviourCloningPolicy(**model_kwargs)
         model.obs_mean.copy_(obs.mean(0))
         model.obs_std.copy_(obs.std(0).clamp_min(1e-3))
+    device = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device)
+    model.to(device)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
-    loss_weights = action_loss_weights(actions) if args.balance_action_loss else torch.ones(actions.shape[1])
+    loss_weights = (action_loss_weights(actions) if args.balance_action_loss else torch.ones(actions.shape[1])).to(device)
     curve = LearningCurve(run_dir, ["iteration", "minutes", "loss", "success_once", "success_at_end", "return"])
-    print(f"{len(episodes)} demonstrations and {len(labelled_obs)} labelled states, {len(obs)} transitions of {env_id} {env_kwargs}; training in {run_dir}")
+    obs, actions = obs.to(device), actions.to(device)
+    print(f"{len(episodes)} demonstrations and {len(labelled_obs)} labelled states, {len(obs)} transitions of {env_id} {env_kwargs} on {device}; training in {run_dir}")
 
     checkpoint = run_dir / "checkpoint.pt"
     best = BestCheckpoint(checkpoint)
@@ -115,7 +119,7 @@ def main(args: Args) -> Path:
     eval_seeds = range(args.eval_seed_start, args.eval_seed_start + args.eval_episodes)
     progress = tqdm(range(1, args.max_iterations + 1), desc="bc")
     for iteration in progress:
-        batch = draw()
+        batch = draw().to(device)
         inputs = obs[batch] + args.obs_noise * model.obs_std * torch.randn_like(obs[batch])
         loss = ((model(inputs) - actions[batch]).pow(2) * loss_weights).mean()
         set_learning_rate(optimiser, args, iteration, (time.time() - start) / 60)
@@ -129,7 +133,7 @@ def main(args: Args) -> Path:
             curve.log(iteration=iteration, minutes=minutes, loss=loss.item())
         if iteration % args.eval_every == 0 or out_of_time:
             save()
-            metrics = evaluate_policy(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
+            metrics = evaluate(CheckpointPolicy(str(checkpoint)), env_id, env_kwargs, eval_seeds) if args.eval_episodes else {}
             curve.log(iteration=iteration, minutes=minutes, loss=loss.item(), **{k.replace("episode_", ""): v for k, v in metrics.items()})
             progress.write(f"iteration {iteration}: {metrics}" + (" (best so far)" if metrics and best.update(metrics) else ""))
         if out_of_time:
@@ -137,6 +141,12 @@ def main(args: Args) -> Path:
     curve.plot("iteration", ["loss", "success_once", "success_at_end", "return"], f"BC on {env_id}")
     print(f"checkpoint: {checkpoint}" + (f", best in training evaluations: {best.path}" if best.score else ""))
     return checkpoint
+
+
+def evaluate(policy, env_id: str, env_kwargs: dict, seeds) -> dict[str, float]:
+    from mani_skill_space.rollout import evaluate_policy  # the simulator only where training evaluates
+
+    return evaluate_policy(policy, env_id, env_kwargs, seeds)
 
 
 def load_labelled(args: Args, task: tuple, state_dim: int, action_dim: int) -> tuple[torch.Tensor, torch.Tensor]:
