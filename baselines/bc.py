@@ -166,10 +166,12 @@ def load_labelled(args: Args, task: tuple, state_dim: int, action_dim: int) -> t
 def batch_sampler(demonstrated: int, labelled: int, labelled_share: Optional[float], batch_size: int):
     """Indices into the demonstrations' transitions followed by the labelled states: ``labelled_share`` of each
     batch from the latter, or uniformly from both (None)."""
-    if labelled_share is None or not labelled:
+    if labelled_share is None:
         return lambda: torch.randint(0, demonstrated + labelled, (batch_size,))
     if not 0.0 < labelled_share < 1.0:
         raise ValueError(f"--labelled-share must be within (0, 1), got {labelled_share}")
+    if not labelled:
+        raise ValueError("--labelled-share needs --labelled-states to draw from")
     from_labelled = round(batch_size * labelled_share)
     return lambda: torch.cat([torch.randint(0, demonstrated, (batch_size - from_labelled,)), demonstrated + torch.randint(0, labelled, (from_labelled,))])
 

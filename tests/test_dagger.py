@@ -130,6 +130,8 @@ def test_bc_batches_take_their_share_of_labelled_states():
     bc = _baseline("bc")
     batch = bc.batch_sampler(1000, 10, 0.25, 64)()
     assert len(batch) == 64 and int((batch >= 1000).sum()) == 16 and int(batch.max()) < 1010
-    assert len(bc.batch_sampler(1000, 0, 0.25, 64)()) == 64
+    assert len(bc.batch_sampler(1000, 0, None, 64)()) == 64
+    with pytest.raises(ValueError, match="--labelled-share needs --labelled-states"):
+        bc.batch_sampler(1000, 0, 0.25, 64)
     with pytest.raises(ValueError, match="--labelled-share must be within"):
         bc.batch_sampler(1000, 10, 1.0, 64)
