@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from mani_skill_space.learning import CheckpointPolicy, load_labelled_states
 from mani_skill_space.oracles.end_effector import SPEED_FRACTION
@@ -26,9 +27,7 @@ SOLAR_BC = ROOT / "baselines" / "checkpoints" / "bc_solar_ee.pt"
 
 
 def _rotation(axis, angle):
-    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    skew = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * skew + (1 - np.cos(angle)) * skew @ skew
+    return Rotation.from_rotvec(angle * np.asarray(axis, dtype=float) / np.linalg.norm(axis)).as_matrix()
 
 
 @pytest.mark.parametrize("axis", [[1, 0, 0], [0.3, -0.8, 0.2], [0, 0, -1], [0, 0, 1], [1e-12, 0, 1]])

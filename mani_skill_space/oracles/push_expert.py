@@ -23,8 +23,9 @@ from typing import Optional
 
 import numpy as np
 import sapien
+from scipy.spatial.transform import Rotation
 
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, at_height
 from mani_skill_space.oracles.end_effector import SPEED_FRACTION, arm_delta_controller, delta_action_to
 from mani_skill_space.oracles.insertion import (
     PRE_INSERT_GAP,
@@ -105,7 +106,7 @@ class InsertionPushExpert:
         tcp = self.controller.ee_pose.sp
         if lateral_offset > LIFT_RADIUS:
             if tcp.p[2] < PEG_LIFT_HEIGHT - LIFT_SLACK:
-                return self._move_to(sapien.Pose([tcp.p[0], tcp.p[1], PEG_LIFT_HEIGHT], tcp.q), GRIPPER_CLOSED, SPEED_FRACTION)
+                return self._move_to(at_height(tcp, PEG_LIFT_HEIGHT), GRIPPER_CLOSED, SPEED_FRACTION)
             return None  # the swing over the socket: a joint-space motion in the oracle's plan, not a straight line
         if lateral_offset > REGION_RADIUS:
             return None
@@ -141,15 +142,9 @@ def nearest_twist(end_in_bottom: np.ndarray, symmetry_order: int) -> float:
 
 
 def shortest_turn_onto_z(axis: np.ndarray) -> np.ndarray:
-    """The rotation (3, 3) by the smallest angle that turns the unit vector ``axis`` onto +z (Rodrigues)."""
-    z = np.array([0.0, 0.0, 1.0])
-    cross, cos = np.cross(axis, z), float(axis @ z)
-    sin = np.linalg.norm(cross)
-    if sin < 1e-9:
-        return np.eye(3) if cos > 0 else np.diag([1.0, -1.0, -1.0])
-    k = cross / sin
-    skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + sin * skew + (1.0 - cos) * skew @ skew
+    """The rotation (3, 3) by the smallest angle that turns the unit vector ``axis`` onto +z."""
+    turn, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [axis])  # one pair: the shortest rotation (scipy >= 1.11)
+    return turn.as_matrix()
 
 
 def slowed(arm_action: np.ndarray, position_fraction: float = SPEED_FRACTION) -> np.ndarray:
