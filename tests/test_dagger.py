@@ -11,7 +11,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from mani_skill_space.learning import CheckpointPolicy, load_labelled_states
-from mani_skill_space.oracles.end_effector import SPEED_FRACTION
+from mani_skill_space.oracles.end_effector import ROTATION_SPEED_FRACTION, TRANSLATION_SPEED_FRACTION
 from mani_skill_space.oracles.push_expert import (
     HOVER_GAP,
     InsertionPushExpert,
@@ -51,8 +51,8 @@ def test_the_nearest_twist_snaps_to_the_profiles_symmetry_even_for_a_peg_lying_a
 
 def test_slowed_actions_keep_to_a_share_of_the_controllers_limits():
     action = slowed(np.array([0.9, -0.05, -1.0, 0.6, 0.8, 0.0]))
-    np.testing.assert_allclose(action[:3], [SPEED_FRACTION, -0.05, -SPEED_FRACTION])
-    assert np.linalg.norm(action[3:]) == pytest.approx(SPEED_FRACTION)
+    np.testing.assert_allclose(action[:3], [TRANSLATION_SPEED_FRACTION, -0.05, -TRANSLATION_SPEED_FRACTION])
+    assert np.linalg.norm(action[3:]) == pytest.approx(ROTATION_SPEED_FRACTION)
     np.testing.assert_allclose(action[3:] / np.linalg.norm(action[3:]), [0.6, 0.8, 0.0])  # the turn's direction kept
     np.testing.assert_allclose(slowed(np.array([0.9, 0, 0, 0, 0, 0]), 0.1)[:3], [0.1, 0, 0])
 
@@ -85,7 +85,8 @@ def test_dagger_labels_a_policys_own_states_with_the_peg_in_the_hand(tmp_path):
     assert obs.shape[1] == CheckpointPolicy(str(SOLAR_BC)).checkpoint["model_kwargs"]["state_dim"]
     assert np.all(actions[:, -1] == -1.0)
     assert np.all(actions[:, 2] > 0)  # up
-    assert np.all(np.abs(actions[:, :6]) <= SPEED_FRACTION + 1e-6)
+    assert np.all(np.abs(actions[:, :3]) <= TRANSLATION_SPEED_FRACTION + 1e-6)
+    assert np.all(np.linalg.norm(actions[:, 3:6], axis=1) <= ROTATION_SPEED_FRACTION + 1e-6)
 
 
 def test_dagger_refuses_a_policy_of_a_task_it_has_no_expert_for(tmp_path):

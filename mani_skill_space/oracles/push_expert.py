@@ -26,7 +26,7 @@ import sapien
 from scipy.spatial.transform import Rotation
 
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, at_height
-from mani_skill_space.oracles.end_effector import SPEED_FRACTION, arm_delta_controller, delta_action_to
+from mani_skill_space.oracles.end_effector import ROTATION_SPEED_FRACTION, TRANSLATION_SPEED_FRACTION, arm_delta_controller, delta_action_to
 from mani_skill_space.oracles.insertion import (
     PRE_INSERT_GAP,
     PRESS_DEPTH,
@@ -106,13 +106,13 @@ class InsertionPushExpert:
         tcp = self.controller.ee_pose.sp
         if lateral_offset > LIFT_RADIUS:
             if tcp.p[2] < PEG_LIFT_HEIGHT - LIFT_SLACK:
-                return self._move_to(at_height(tcp, PEG_LIFT_HEIGHT), GRIPPER_CLOSED, SPEED_FRACTION)
+                return self._move_to(at_height(tcp, PEG_LIFT_HEIGHT), GRIPPER_CLOSED, TRANSLATION_SPEED_FRACTION)
             return None  # the swing over the socket: a joint-space motion in the oracle's plan, not a straight line
         if lateral_offset > REGION_RADIUS:
             return None
         return self._action(peg, end, socket, depth + PRE_INSERT_GAP, GRIPPER_CLOSED, CARRY_SPEED_FRACTION)
 
-    def _action(self, peg: int, end: int, socket: int, height: float, gripper: float, speed: float = SPEED_FRACTION) -> np.ndarray:
+    def _action(self, peg: int, end: int, socket: int, height: float, gripper: float, speed: float = TRANSLATION_SPEED_FRACTION) -> np.ndarray:
         """The action that takes peg ``peg``'s end ``end`` to ``height`` above socket ``socket``'s bottom on its axis."""
         env = self.env
         ends = env.peg_end_frames()[0, peg].cpu().numpy().astype(np.float64)
@@ -147,12 +147,12 @@ def shortest_turn_onto_z(axis: np.ndarray) -> np.ndarray:
     return turn.as_matrix()
 
 
-def slowed(arm_action: np.ndarray, position_fraction: float = SPEED_FRACTION) -> np.ndarray:
+def slowed(arm_action: np.ndarray, position_fraction: float = TRANSLATION_SPEED_FRACTION) -> np.ndarray:
     """A normalised arm action held to a share of the controller's per-step limits, as the oracle's motions are:
-    translation per axis to ``position_fraction``, rotation by norm to ``SPEED_FRACTION``."""
+    translation per axis to ``position_fraction``, rotation by norm to ``ROTATION_SPEED_FRACTION``."""
     position = np.clip(arm_action[:3], -position_fraction, position_fraction)
     rotation = arm_action[3:]
     norm = np.linalg.norm(rotation)
-    if norm > SPEED_FRACTION:
-        rotation = rotation * (SPEED_FRACTION / norm)
+    if norm > ROTATION_SPEED_FRACTION:
+        rotation = rotation * (ROTATION_SPEED_FRACTION / norm)
     return np.concatenate([position, rotation])
