@@ -9,7 +9,14 @@ from scipy.spatial.transform import Rotation
 
 import mani_skill_space  # noqa: F401
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.end_effector import EndEffectorDeltaPose, arm_delta_controller, delta_action_to, speed_limit
+from mani_skill_space.oracles.end_effector import (
+    ROTATION_SPEED_FRACTION,
+    TRANSLATION_SPEED_FRACTION,
+    EndEffectorDeltaPose,
+    arm_delta_controller,
+    delta_action_to,
+    speed_limit,
+)
 from mani_skill_space.rollout import run_episode
 
 
@@ -67,6 +74,23 @@ def test_the_oracle_refuses_an_env_in_another_control_mode():
 def test_an_unknown_control_mode_names_the_valid_ones():
     with pytest.raises(ValueError, match="pd_joint_pos, pd_ee_delta_pose"):
         oracle_for("PegInHoleAssembly-v1", "pd_joint_delta_pos")
+
+
+@pytest.mark.parametrize("axis", [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+def test_the_hand_held_at_the_rotation_limit_turns_no_faster_than_the_oracle_plans_turns(ee_env, axis):
+    """ROTATION_SPEED_FRACTION rests on this: a turn planned at that share of the limit is as fast as the hand turns
+    at all under the controller, and not much faster (translation, planned at a smaller share, is not the bound)."""
+    ee_env.reset(seed=0)
+    controller = arm_delta_controller(ee_env.unwrapped)  # after the reset, which may rebuild the agent
+    limit = float(np.abs(np.asarray(controller.config.rot_lower)).min())
+    rotations = []
+    for _ in range(12):
+        ee_env.step(np.array([0.0, 0.0, 0.0, *axis, 1.0], dtype=np.float32))
+        rotations.append(Rotation.from_quat(np.roll(controller.ee_pose_at_base.q[0].numpy().astype(np.float64), -1)))
+    per_step = np.array([(a.inv() * b).magnitude() for a, b in zip(rotations[4:], rotations[5:])])  # after the start
+    assert np.all(per_step <= ROTATION_SPEED_FRACTION * limit)
+    assert np.all(per_step >= 0.7 * ROTATION_SPEED_FRACTION * limit)
+    assert TRANSLATION_SPEED_FRACTION < ROTATION_SPEED_FRACTION
 
 
 def test_fast_motions_are_slowed_to_the_speed_limit_and_slow_ones_kept(ee_env):
