@@ -134,12 +134,20 @@ def delta_action_to(controller: PDEEPoseController, target: tuple[np.ndarray, np
     delta_rotation = matrix_to_euler_angles(rotation_target @ rotation_now.T, "XYZ").numpy()
 
     low, high = controller.action_space_low.cpu().numpy(), controller.action_space_high.cpu().numpy()
-    position_action = np.clip(inv_scale_action(delta_position, low[:3], high[:3]), -1.0, 1.0)
+    position_action = inv_scale_action(delta_position, low[:3], high[:3])
     rotation_action = delta_rotation / np.asarray(controller.config.rot_lower, dtype=np.float64)
-    norm = np.linalg.norm(rotation_action)
-    if norm > 1.0:
-        rotation_action = rotation_action / norm
-    return np.concatenate([position_action, rotation_action])
+    return clipped_arm_action(np.concatenate([position_action, rotation_action]))
+
+
+def clipped_arm_action(arm_action: np.ndarray, position_bound: float = 1.0, rotation_bound: float = 1.0) -> np.ndarray:
+    """A normalised arm action (3 translation, 3 rotation) clipped the way the controller clips it: translation per
+    axis to ``position_bound``, rotation by norm to ``rotation_bound`` (the turn's direction kept)."""
+    position = np.clip(arm_action[:3], -position_bound, position_bound)
+    rotation = arm_action[3:]
+    norm = np.linalg.norm(rotation)
+    if norm > rotation_bound:
+        rotation = rotation * (rotation_bound / norm)
+    return np.concatenate([position, rotation])
 
 
 def _poses_within(pose: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray], tolerance: tuple[float, float]) -> bool:

@@ -26,7 +26,13 @@ import sapien
 from scipy.spatial.transform import Rotation
 
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, at_height
-from mani_skill_space.oracles.end_effector import ROTATION_SPEED_FRACTION, TRANSLATION_SPEED_FRACTION, arm_delta_controller, delta_action_to
+from mani_skill_space.oracles.end_effector import (
+    ROTATION_SPEED_FRACTION,
+    TRANSLATION_SPEED_FRACTION,
+    arm_delta_controller,
+    clipped_arm_action,
+    delta_action_to,
+)
 from mani_skill_space.oracles.insertion import (
     PRE_INSERT_GAP,
     PRESS_DEPTH,
@@ -150,9 +156,4 @@ def shortest_turn_onto_z(axis: np.ndarray) -> np.ndarray:
 def slowed(arm_action: np.ndarray, position_fraction: float = TRANSLATION_SPEED_FRACTION) -> np.ndarray:
     """A normalised arm action held to a share of the controller's per-step limits, as the oracle's motions are:
     translation per axis to ``position_fraction``, rotation by norm to ``ROTATION_SPEED_FRACTION``."""
-    position = np.clip(arm_action[:3], -position_fraction, position_fraction)
-    rotation = arm_action[3:]
-    norm = np.linalg.norm(rotation)
-    if norm > ROTATION_SPEED_FRACTION:
-        rotation = rotation * (ROTATION_SPEED_FRACTION / norm)
-    return np.concatenate([position, rotation])
+    return clipped_arm_action(arm_action, position_fraction, ROTATION_SPEED_FRACTION)
