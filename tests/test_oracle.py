@@ -396,6 +396,59 @@ def test_the_push_is_planned_from_where_the_move_over_the_hole_leaves_the_arm(in
     np.testing.assert_array_equal(planner._insertion_arm(target, 0.0, np.eye(4))[0], arms[0])
 
 
+class _StraightLinesOverTheHole(_ArmsOverTheHole):
+    """...acting through a TCP controller, whose straight lines of the hand end at ``line_end`` (None: they stall)."""
+
+    tcp_speed_limit = (0.03, 0.05)
+    moves_in_straight_lines = True
+
+    def __init__(self, arms_and_margins, line_end):
+        super().__init__(arms_and_margins)
+        self.line_end = line_end
+
+    def straight_line_path(self, start, pose):
+        return None if self.line_end is None else np.repeat(self.line_end[None], 3, axis=0)
+
+    def joint_move_end(self, start, goal):
+        return goal
+
+
+@pytest.mark.parametrize(
+    "line_margin, keep_margin, chosen",
+    [
+        (0.3, True, "straight"),  # a straight swing whose push keeps the margin comes first
+        (0.05, False, "straight"),  # ...and any straight swing where the insertion asks no margin under TCP control
+        (0.05, True, "joint"),  # ...else the push that keeps farther from the limits
+        (None, True, "joint"),  # a straight line that stalls
+    ],
+)
+def test_under_a_tcp_controller_the_peg_swings_over_the_hole_in_straight_lines_where_it_can(inserter, line_margin, keep_margin, chosen):
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    joint_arm, line_end = np.full(7, 0.0), np.full(7, 9.0)
+    oracle = _StraightLinesOverTheHole([(joint_arm, 0.3)], None if line_margin is None else line_end)
+    oracle.margins[9.0] = line_margin
+    planner = PegInserter.__new__(PegInserter)
+    planner.oracle, planner.planned_arm, planner.settings = oracle, None, InsertionSettings(push_margin_under_tcp_control=keep_margin)
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
+    swing, margin = planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7))
+    if chosen == "straight":
+        np.testing.assert_array_equal(swing.arm, line_end)
+        assert len(swing.paths) == 2 and margin == line_margin  # up over the hole at the lift height, then down
+    else:
+        np.testing.assert_array_equal(swing.arm, joint_arm)
+        assert swing.paths == () and margin == 0.3
+    straight_only = planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7), straight_only=True)
+    assert (straight_only is None) == (line_margin is None)
+    # planning ahead (no start to swing from) there is no straight line to follow; nor for an oracle that does not
+    # move in straight lines
+    swing, _ = planner._swing_over(target, 0.0, np.eye(4))
+    assert swing.paths == ()
+    oracle.moves_in_straight_lines = False
+    swing, _ = planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7))
+    assert swing.paths == () and planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7), straight_only=True) is None
+
+
 def test_a_screw_motions_joint_limit_margin_is_its_least_along_the_way(inserter):
     """Turning the hand about its approach axis turns the wrist: one way toward its nearer limit, the other away. The
     margin of each motion is the least of every joint's distance to its limits over the whole motion, ends
@@ -562,6 +615,6 @@ def test_the_line_up_prefers_a_push_clear_of_the_joint_limits_then_the_first_fea
         with pytest.raises(PlanningFailed):
             planner._line_up(target, 0, 0.0)
         return
-    arm, twist = planner._line_up(target, 0, 0.0)
-    np.testing.assert_array_equal(arm, chosen)
+    swing, twist = planner._line_up(target, 0, 0.0)
+    np.testing.assert_array_equal(swing.arm, chosen)
     assert twist == pytest.approx(chosen[0] * np.pi / 2)

@@ -4,6 +4,7 @@ its per-step limits, and they solve a seed of every task in that mode (physx_cpu
 import gymnasium as gym
 import numpy as np
 import pytest
+import sapien
 import torch
 from scipy.spatial.transform import Rotation
 
@@ -131,15 +132,21 @@ def test_the_oracle_solves_every_task_in_ee_delta_pose(env_id, domain, asset_sou
     env.close()
 
 
+def _peg_oracle_in_ee(ee_env) -> EndEffectorDeltaPose:
+    """The Peg-in-Hole oracle acting in pd_ee_delta_pose on seed 0, its planner ready."""
+    ee_env.unwrapped.reset(seed=0)
+    policy = EndEffectorDeltaPose(oracle_for("PegInHoleAssembly-v1"))
+    policy.reset(ee_env, 0)
+    policy.oracle.make_solver(ee_env.unwrapped)
+    return policy
+
+
 def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_env):
     """A TCP controller follows the hand's poses along a joint move but settles the arm's redundancy its own way: the
     oracle predicts the joints it ends in (``Oracle.joint_move_end``), which are not the move's goal."""
     env = ee_env.unwrapped
-    env.reset(seed=0)
-    policy = EndEffectorDeltaPose(oracle_for("PegInHoleAssembly-v1"))
-    policy.reset(ee_env, 0)
+    policy = _peg_oracle_in_ee(ee_env)
     oracle = policy.oracle
-    oracle.make_solver(env)
     start = oracle.arm_qpos()
     goal = start + np.array([0.9, 0.3, -0.9, 0.3, 0.9, 0.5, -0.6])
     predicted = oracle.joint_move_end(start, goal)
@@ -154,10 +161,38 @@ def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_
     env.reset(seed=0)
 
 
-def test_the_solar_panel_oracle_fills_three_sockets_in_ee_delta_pose():
-    """Solar Panel Assembly's four pegs and panel do not fit its 1000 steps in this mode, but no push stalls (seed 0
-    filled one socket before ``Oracle.joint_move_end``: the second push stalled at a joint limit)."""
+def test_the_solar_panel_oracle_assembles_within_the_episode_in_ee_delta_pose():
+    """Solar Panel Assembly's four pegs and panel fit its 1000 steps in this mode with the hand moving in straight lines
+    (``Oracle.straight_lines_under_tcp_control``; with joint-space swings seed 0 filled three sockets, and before
+    ``Oracle.joint_move_end`` one: the second push stalled at a joint limit)."""
     env = gym.make("SolarPanelAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_ee_delta_pose", render_backend="none")
     result = run_episode(env, oracle_for("SolarPanelAssembly-v1", "pd_ee_delta_pose"), 0)
-    assert result.stage >= 3, result.failure
+    assert result.success_once and result.success_at_end, (result.stage, result.failure)
     env.close()
+
+
+def test_a_straight_line_of_the_hand_is_followed_within_the_speed_limit(ee_env):
+    """``Oracle.straight_line_path`` (the controller's IK stepped along the line, ``EndEffectorDeltaPose.line_path``): the
+    hand moves evenly along the segment and turns evenly about one axis, no faster than the oracle's limits, and ends at
+    the goal; a goal out of the arm's reach has no such path."""
+    policy = _peg_oracle_in_ee(ee_env)
+    oracle = policy.oracle
+    start, hand = oracle.arm_qpos(), oracle.tcp_pose()
+    turn = Rotation.from_rotvec([0.3, -0.4, 0.5])
+    goal = sapien.Pose(hand.p + [0.05, -0.08, -0.06], np.roll((turn * Rotation.from_quat(np.roll(hand.q, -1))).as_quat(), 1))
+    assert oracle.straight_line_path(start, goal) is None  # the single peg's oracle does not move in straight lines
+    oracle.straight_lines_under_tcp_control = True
+    path = oracle.straight_line_path(start, goal)
+    assert path is not None
+    positions, rotations = oracle._tcp_poses(np.concatenate([start[None], path]))
+    metres, radians = oracle.tcp_speed_limit
+    steps = int(np.ceil(max(0.11 / metres, turn.magnitude() / radians)))
+    assert len(path) == pytest.approx(steps, abs=1)
+    assert np.linalg.norm(np.diff(positions, axis=0), axis=1).max() <= metres * 1.05
+    assert max((a.inv() * b).magnitude() for a, b in zip(rotations, rotations[1:])) <= radians * 1.05
+    along = (positions - hand.p) @ (goal.p - hand.p) / np.linalg.norm(goal.p - hand.p) ** 2
+    off_line = np.linalg.norm(positions - hand.p - along[:, None] * (goal.p - hand.p), axis=1)
+    assert off_line.max() < 0.002 and np.all(np.diff(along) > 0)
+    np.testing.assert_allclose(positions[-1], goal.p, atol=0.005)
+    assert (rotations[-1].inv() * Rotation.from_quat(np.roll(goal.q, -1))).magnitude() < 0.05
+    assert oracle.straight_line_path(start, sapien.Pose(hand.p + [1.5, 0.0, 0.0], hand.q)) is None

@@ -72,6 +72,20 @@ class Oracle(Policy):
     joint path (arm joints at each step) from a start (``(start, path)``; None where it stalls): a TCP controller follows
     the hand's pose, not the joints, and its IK, re-solved from the joints as they are, settles the arm's redundancy
     its own way (``joint_move_end``)."""
+    line_follower: Optional[Callable[[np.ndarray, sapien.Pose], Optional[np.ndarray]]] = None
+    """Where set (``oracles.end_effector`` sets it), the arm joint targets, one per control step within
+    ``tcp_speed_limit``, along which a TCP controller takes the hand in a straight line (moving evenly, turning evenly
+    about one axis) from where arm joints ``start`` put it to a pose (world frame), given ``(start, pose)``; None where
+    it stalls short of the pose (``straight_line_path``)."""
+    straight_lines_under_tcp_control: bool = False
+    """Whether, acting through a TCP controller (``line_follower`` set), the oracle moves the hand in straight lines
+    (``straight_line_path``) where mplib's screw motion has no path and, in the motions that ask for one, instead of a
+    joint-space swing. That controller follows the hand's poses, so a joint-space move to another IK solution makes it
+    take the hand along the whole whirl of the joints (procedural peg, Moon, seed 6045: 5.9 rad of turning and 0.86 m
+    of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion stops at the first
+    joint limit its Jacobian steps run into, where the controller's IK, stepped along the line, gets round it. Solar
+    Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single peg's did not gain (see
+    the README's *Straight lines of the hand*)."""
     path_check_step: Optional[float] = None
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
@@ -161,9 +175,10 @@ class Oracle(Policy):
         return np.hstack([self.arm_qpos(), self.gripper]).astype(np.float32)
 
     def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0, speed: float = 1.0, acceleration: float = 1.0) -> Iterator[np.ndarray]:
-        """Screw motion of the TCP to ``pose`` (or, where there is none, a joint-space move to the nearest
-        collision-free IK solution) at ``speed`` times the usual joint limits (and ``acceleration`` times the
-        usual accelerations, on top); ``settle_steps`` more steps hold the goal so the arm catches up."""
+        """Screw motion of the TCP to ``pose`` (or, where there is none, its straight line there where the oracle moves
+        in them, ``straight_line_path``, else a joint-space move to the nearest collision-free IK solution) at ``speed``
+        times the usual joint limits (and ``acceleration`` times the usual accelerations, on top); ``settle_steps`` more
+        steps hold the goal so the arm catches up."""
         self.phase = what
         # on a free-flying servicer the motion moves the bus, so the hand ends off the goal by the bus's drift:
         # a few shorter motions planned from where the bus is then close in on it
@@ -173,6 +188,8 @@ class Oracle(Policy):
                 break
             with self._speed(speed, acceleration):
                 positions = self._screw_path(self.arm_qpos(), pose)
+                if positions is None:
+                    positions = self.straight_line_path(self.arm_qpos(), pose)
                 if positions is None:
                     positions = self._joint_path(pose, what)
             yield from self._follow(positions)
@@ -236,15 +253,41 @@ class Oracle(Policy):
         return None
 
     def motion_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
-        """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its joint move), or
-        None if it would fail: for checking a whole plan before moving."""
+        """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its straight line, else its
+        joint move), or None if it would fail: for checking a whole plan before moving."""
         end = self.screw_end(start, pose)
+        if end is None:
+            line = self.straight_line_path(start, pose)
+            end = None if line is None else line[-1]
         return end if end is not None else self.free_joint_goal(start, pose)
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
         positions = self._screw_path(start, pose)
         return None if positions is None else positions[-1][: len(start)]
+
+    def straight_line_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """Where the oracle moves in straight lines (``moves_in_straight_lines``), the arm joint targets that take the hand
+        in a straight line from where ``start`` puts it to ``pose``, if the controller gets there with the arm clear of
+        collisions all the way; else None."""
+        if not self.moves_in_straight_lines:
+            return None
+        path = self.line_follower(start, pose)
+        if path is None:
+            return None
+        waypoints = np.concatenate([np.asarray(start)[None], path])
+        return path if all(self.path_is_free(a, b, samples=2) for a, b in zip(waypoints, waypoints[1:])) else None
+
+    @property
+    def moves_in_straight_lines(self) -> bool:
+        """Whether the oracle acts through a TCP controller and moves the hand in straight lines there
+        (``straight_lines_under_tcp_control``)."""
+        return self.line_follower is not None and self.straight_lines_under_tcp_control
+
+    def follow(self, path: np.ndarray, what: str) -> Iterator[np.ndarray]:
+        """Send ``path`` (arm joint targets, one per control step) as it is."""
+        self.phase = what
+        yield from self._follow(path, retime=False)
 
     def joint_move(self, goal: np.ndarray, what: str, acceleration: float = 1.0) -> Iterator[np.ndarray]:
         """Straight joint-space move to ``goal`` (arm joints), time-optimally parameterised (at ``acceleration``

@@ -19,11 +19,13 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
+import sapien
 import torch
 from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
 from mani_skill.utils.geometry.rotation_conversions import matrix_to_euler_angles, quaternion_to_matrix
 from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.structs.pose import Pose
+from scipy.spatial.transform import Rotation, Slerp
 
 from mani_skill_space.oracles.base import Oracle
 from mani_skill_space.policy import WrapsOracle
@@ -62,6 +64,7 @@ class EndEffectorDeltaPose(WrapsOracle):
         self.model = self.controller.articulation.create_pinocchio_model()
         self.oracle.tcp_speed_limit = speed_limit(self.controller)
         self.oracle.arm_follower = self.followed_end
+        self.oracle.line_follower = self.line_path
         self.oracle.reset(env, seed)
 
     def act(self, obs) -> np.ndarray:
@@ -72,22 +75,44 @@ class EndEffectorDeltaPose(WrapsOracle):
 
     def followed_end(self, start: np.ndarray, path: np.ndarray) -> Optional[np.ndarray]:
         """The arm joints in which the controller leaves the arm when ``act`` is given the joint targets ``path`` (one
-        per step) from ``start``, the arm taken to keep up with its targets: at each step the controller's own IK
-        (CPU, ``compute_ik``), from the joints reached, for the TCP pose the target puts the hand in, the joints stopped
-        at their limits (the IK does not know them; where it fails, the controller holds the arm for that step). None if
-        the hand does not end at the path's last pose (``FOLLOW_TOLERANCE``): the motion stalls short of it."""
+        per step) from ``start``, the arm taken to keep up with its targets (``_followed``); None if the hand does not
+        end at the path's last pose: the motion stalls short of it."""
+        followed = self._followed(start, [self.tcp_pose_at_base(target) for target in path])
+        return None if followed is None else followed[-1]
+
+    def line_path(self, start: np.ndarray, goal: sapien.Pose) -> Optional[np.ndarray]:
+        """Arm joint targets, one per control step, that take the hand in a straight line from where ``start`` puts it
+        to ``goal`` (world frame): its position moved and its orientation turned (about one axis) evenly, as fast as the
+        oracle's speed limit allows, each target the controller's own IK (``_followed``); None where the controller
+        stalls short of ``goal``."""
+        base_goal = self.controller.articulation.pose.sp.inv() * goal
+        position, quaternion = self.tcp_pose_at_base(start)
+        rotations = Rotation.from_quat(np.stack([np.roll(quaternion, -1), np.roll(base_goal.q, -1)]))  # wxyz -> xyzw
+        metres, radians = self.oracle.tcp_speed_limit
+        distance, turn = np.linalg.norm(base_goal.p - position), (rotations[0].inv() * rotations[1]).magnitude()
+        fractions = np.linspace(0.0, 1.0, max(1, int(np.ceil(max(distance / metres, turn / radians)))) + 1)[1:]
+        turned = Slerp([0.0, 1.0], rotations)(fractions).as_quat()
+        hands = [(position + t * (base_goal.p - position), np.roll(q, 1)) for t, q in zip(fractions, turned)]
+        return self._followed(start, hands)
+
+    def _followed(self, start: np.ndarray, hands: list) -> Optional[np.ndarray]:
+        """The arm joints, one per step, in which the controller puts the arm when sent hand poses ``hands`` (position,
+        wxyz quaternion in the base frame) from ``start``, the arm taken to keep up: at each step the controller's own IK
+        (CPU, ``compute_ik``), from the joints reached, the joints stopped at their limits (the IK does not know them;
+        where it fails, the controller holds the arm for that step). None if the hand does not end at the last pose
+        (``FOLLOW_TOLERANCE``)."""
         articulation = self.controller.articulation
         arm = self.controller.active_joint_indices
         low, high = articulation.get_qlimits()[0, arm].T
         qpos = articulation.get_qpos().clone()
         qpos[0, arm] = torch.as_tensor(np.asarray(start), dtype=qpos.dtype)
-        for target in path:
-            hand = self.tcp_pose_at_base(target)
+        followed = []
+        for hand in hands:
             solved = self.controller.kinematics.compute_ik(Pose.create_from_pq(*hand), q0=qpos)
             if solved is not None:
                 qpos[0, arm] = torch.clamp(solved[0].to(qpos.dtype), low, high)
-        end = qpos[0, arm].cpu().numpy().astype(np.float64)
-        return end if _poses_within(self.tcp_pose_at_base(end), hand, FOLLOW_TOLERANCE) else None
+            followed.append(qpos[0, arm].cpu().numpy().astype(np.float64))
+        return np.stack(followed) if _poses_within(self.tcp_pose_at_base(followed[-1]), hands[-1], FOLLOW_TOLERANCE) else None
 
     def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm

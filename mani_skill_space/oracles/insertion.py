@@ -151,6 +151,15 @@ class PegTarget:
 
 
 @dataclass(frozen=True)
+class Swing:
+    """How the peg is carried over its hole: a joint-space move to ``arm``, or (``paths`` given, under a TCP controller)
+    those joint paths in turn (``PegInserter._straight_swing``), which end at ``arm``."""
+
+    arm: np.ndarray
+    paths: tuple = ()
+
+
+@dataclass(frozen=True)
 class InsertionSettings:
     lift_height: float = 0.3
     """Height (m) of the TCP after lifting the peg, before swinging it over the hole."""
@@ -230,8 +239,8 @@ class PegInserter:
         """Line the peg up over the hole (if ``line_up``) and push it in; returns the twist it went in with."""
         if line_up:
             with self._reaching():
-                arm, twist = self._line_up(target, end, twist)
-                yield from self.oracle.joint_move(arm, "over the hole")
+                swing, twist = self._line_up(target, end, twist)
+                yield from self._carry_over(swing)
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             yield from self._lower_in(target, end, twist)
         return twist
@@ -277,18 +286,33 @@ class PegInserter:
         # all the checked grasps together (those lifting the peg straight up first, then the others), then each
         # unchecked last resort on its own
         checked = [c for c in candidates if c[1]]
-        groups = [(checked, True), (checked, False)] + [([c], None) for c in candidates if not c[1]]
-        for group, straight_lift in groups:
-            plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift)
+        last_resorts = [([c], None, False) for c in candidates if not c[1]]
+        groups = [(checked, True, False), (checked, False, False)] + last_resorts
+        if getattr(self.oracle, "moves_in_straight_lines", False):  # straight swings first
+            straight = lambda groups: [(group, lift, True) for group, lift, _ in groups]  # noqa: E731
+            groups = straight(groups[:2]) + groups
+        for group, straight_lift, straight_swing in groups:
+            plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift, straight_swing)
+            if straight_swing:  # first choice only where its push keeps the margin asked for
+                plans = ((plan, margin) for plan, margin in plans if margin >= self.push_joint_margin)
             plan = _clear_else_first(plans, self.push_joint_margin)
             if plan is not None:
-                self.planned_arm, grasp, twist = plan
+                swing, grasp, twist = plan
+                self.planned_arm = swing.arm
                 return grasp, twist
         raise PlanningFailed("no grasp of the peg lets the arm line it up with the hole and push it in")
 
     def _feasible_plans(
-        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, candidates: list, straight_lift: Optional[bool] = None
-    ) -> Iterator[tuple[tuple[np.ndarray, sapien.Pose, float], float]]:
+        self,
+        target: PegTarget,
+        tip: np.ndarray,
+        start: np.ndarray,
+        outward: np.ndarray,
+        peg_points: np.ndarray,
+        candidates: list,
+        straight_lift: Optional[bool] = None,
+        straight_swing: bool = False,
+    ) -> Iterator[tuple[tuple[Swing, sapien.Pose, float], float]]:
         """For each of ``candidates`` (grasp, whether its fingers are checked) in turn and each twist over the hole
         (the hand pointing down and away from the arm first), the plans (arm over the hole, grasp, twist) for
         which the whole insertion is feasible from ``start`` (only those whose lift is, or with False is not, a
@@ -311,7 +335,7 @@ class PegInserter:
                 if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
                 with self._reaching():
-                    found = self._insertion_arm(target, twist, tip_in_hand, start=lifted)
+                    found = self._swing_over(target, twist, tip_in_hand, start=lifted, straight_only=straight_swing)
                 if found is not None:
                     yield (found[0], grasp, float(twist)), found[1]
 
@@ -377,7 +401,7 @@ class PegInserter:
             for approach_gap in LINE_UP_GAPS:
                 for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
                     for candidate in twists:
-                        found = self._insertion_arm(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
+                        found = self._swing_over(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
                         if found is not None:
                             yield (found[0], float(candidate)), found[1]
 
@@ -385,6 +409,59 @@ class PegInserter:
         if line_up is not None:
             return line_up
         raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
+
+    def _carry_over(self, swing: Swing) -> Iterator[np.ndarray]:
+        if not swing.paths:
+            yield from self.oracle.joint_move(swing.arm, "over the hole")
+        for path in swing.paths:
+            yield from self.oracle.follow(path, "over the hole")
+
+    def _swing_over(
+        self,
+        target: PegTarget,
+        twist,
+        tip_in_hand,
+        start: Optional[np.ndarray] = None,
+        push_to: float = -PRESS_DEPTH,
+        approach_gap: float = APPROACH_GAP,
+        straight_only: bool = False,
+    ) -> Optional[tuple[Swing, float]]:
+        """How to carry the peg (``tip_in_hand``) from ``start`` to ``approach_gap`` over the hole at ``twist``, with the
+        margin of the push from there (as ``_insertion_arm``): where the oracle moves in straight lines, the straight swing
+        (``_straight_swing``) where its push keeps the margin the insertion asks for (``push_joint_margin``), else the
+        joint-space move to an arm configuration over the hole (``_insertion_arm``), else whichever push keeps farther
+        from the limits; None if there is neither (``straight_only``: the straight swing or None)."""
+        straight = None
+        if start is not None and getattr(self.oracle, "moves_in_straight_lines", False):
+            straight = self._straight_swing(target, twist, tip_in_hand, start, push_to, approach_gap)
+        if straight_only or (straight is not None and straight[1] >= self.push_joint_margin):
+            return straight
+        found = self._insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap)
+        joint = None if found is None else (Swing(found[0]), found[1])
+        feasible = [swing for swing in (joint, straight) if swing is not None]
+        return max(feasible, key=lambda swing: swing[1]) if feasible else None
+
+    def _straight_swing(self, target: PegTarget, twist, tip_in_hand, start: np.ndarray, push_to: float, approach_gap: float) -> Optional[tuple[Swing, float]]:
+        """The hand in a straight line from ``start`` to its pose over the hole raised to the lift height (the peg turned
+        above the module, not through it), then straight down to it (``Oracle.straight_line_path``), with the margin of
+        the push from there; None where either line collides or stalls, or no push follows."""
+        over = self._hand_over_hole(target, twist, tip_in_hand, target.depth + approach_gap)
+        high = at_height(over, max(self.settings.lift_height, float(over.p[2])))
+        paths, arm = [], start
+        for pose in (high, over):
+            path = self.oracle.straight_line_path(arm, pose)
+            if path is None:
+                return None
+            paths.append(path)
+            arm = path[-1]
+        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+            margin = self.oracle.screw_limit_margin(arm, self._hand_over_hole(target, twist, tip_in_hand, push_to))
+        return None if margin is None else (Swing(arm, tuple(paths)), margin)
+
+    @staticmethod
+    def _hand_over_hole(target: PegTarget, twist, tip_in_hand, height: float) -> sapien.Pose:
+        """The hand pose holding the tip (``tip_in_hand``) ``height`` above the hole's bottom on its axis, at ``twist``."""
+        return sapien.Pose(_along_axis(target.bottom, twist, height) @ np.linalg.inv(tip_in_hand))
 
     def _insertion_arm(
         self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
@@ -394,10 +471,8 @@ class PegInserter:
         with the push's least joint-limit margin: the first whose push keeps ``PUSH_JOINT_MARGIN`` from the limits, else the
         one whose push keeps farthest from them; None if there is none. Given ``start``, the push is planned from where the
         move really leaves the arm (``Oracle.joint_move_end``: under a TCP controller, not the configuration moved to)."""
-        bottom, depth = target.bottom, target.depth
-        hand = lambda height: sapien.Pose(_along_axis(bottom, twist, height) @ np.linalg.inv(tip_in_hand))  # noqa: E731
-        pressed = hand(push_to)
-        over = hand(depth + approach_gap)
+        pressed = self._hand_over_hole(target, twist, tip_in_hand, push_to)
+        over = self._hand_over_hole(target, twist, tip_in_hand, target.depth + approach_gap)
         solutions = self.oracle.ik_solutions(over)
         if self.planned_arm is not None:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
@@ -434,7 +509,7 @@ class PegInserter:
             for roll in GRASP_ROLLS:
                 for tilt in GRASP_TILTS:
                     grasp = self._grasp_pose(target, tip, tilt, roll, extra_reach)
-                    for pose in (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)):
+                    for pose in self._wrist_turns(grasp):
                         candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad), extra_reach == 0.0))
         firm = [(pose, near) for pose, overlap, near in candidates if overlap >= FIRM_PAD_OVERLAP]
         firm.sort(key=lambda candidate: not self._pads_square_on_sides(candidate[0], peg_points))  # stable: square first
@@ -444,6 +519,16 @@ class PegInserter:
         for pose, near in firm + weak:
             if near:
                 yield pose, False
+
+    def _wrist_turns(self, grasp: sapien.Pose) -> tuple[sapien.Pose, sapien.Pose]:
+        """``grasp`` and the same grip with the hand turned half a turn about its approach; where the oracle moves in
+        straight lines under a TCP controller, the one the hand turns less to reach from where it is first: turning is
+        what bounds that controller (a pre-grasp turning 3 rad takes 66 steps)."""
+        turns = (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH))
+        if not getattr(self.oracle, "moves_in_straight_lines", False):
+            return turns
+        hand = self.oracle.tcp_pose()
+        return tuple(sorted(turns, key=lambda pose: _turn_between(hand, pose)))
 
     @staticmethod
     def _surface_rise(target: PegTarget) -> float:
@@ -534,6 +619,11 @@ def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
     lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
     near_entrance = along > target.depth - KEEPOUT_BELOW_ENTRANCE
     return points[(lateral > target.radius + AXIS_KEEPOUT) | ~near_entrance]
+
+
+def _turn_between(a: sapien.Pose, b: sapien.Pose) -> float:
+    """The angle (rad) of the rotation from ``a``'s orientation to ``b``'s."""
+    return float(2.0 * np.arccos(min(1.0, abs(float(np.dot(a.q, b.q))))))
 
 
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
