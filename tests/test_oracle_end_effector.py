@@ -112,6 +112,20 @@ def test_fast_motions_are_slowed_to_the_speed_limit_and_slow_ones_kept(ee_env):
     assert max((a.inv() * b).magnitude() for a, b in zip(rotations, rotations[1:])) <= radians * 1.001
     slow = start + np.linspace(0.0, 1.0, 40)[1:, None] * np.full(7, 0.01)
     np.testing.assert_array_equal(oracle.paced(slow), slow)
+    # a brisk free-space motion (planned at more than the usual joint accelerations; this one moves the TCP 0.3 m and
+    # hardly turns it) may move the TCP free_space_translation_scale times farther a step, for an oracle that asks for
+    # it (Solar Panel Assembly's)
+    goal = start + np.array([0.0, 0.6, 0.0, 0.0, 0.0, 0.6, 0.0])
+    with oracle._speed(1.0, 4.0):
+        fast = oracle._timed_path(start, goal)
+    slowed = oracle.paced(fast, acceleration=4.0)
+    oracle.free_space_translation_scale = 1.5
+    np.testing.assert_array_equal(oracle.paced(fast), slowed)
+    brisk = oracle.paced(fast, acceleration=4.0)
+    np.testing.assert_allclose(brisk[-1], goal, atol=1e-9)
+    positions, _ = oracle._tcp_poses(np.concatenate([start[None], brisk]))
+    moves = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+    assert len(brisk) < len(slowed) and metres * 1.1 < moves.max() <= 1.5 * metres * 1.001
 
 
 @pytest.mark.parametrize(

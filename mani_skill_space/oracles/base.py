@@ -86,6 +86,10 @@ class Oracle(Policy):
     joint limit its Jacobian steps run into, where the controller's IK, stepped along the line, gets round it. Solar
     Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single peg's did not gain (see
     the README's *Straight lines of the hand*)."""
+    free_space_translation_scale: float = 1.0
+    """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
+    may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
+    motions, e.g. an empty hand's to its next grasp)."""
     path_check_step: Optional[float] = None
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
@@ -192,7 +196,7 @@ class Oracle(Policy):
                     positions = self.straight_line_path(self.arm_qpos(), pose)
                 if positions is None:
                     positions = self._joint_path(pose, what)
-            yield from self._follow(positions)
+            yield from self._follow(self.paced(positions, acceleration=acceleration), retime=False)
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
     def _plan_with_the_fingers_now(self) -> None:
@@ -301,7 +305,7 @@ class Oracle(Policy):
     def _joint_move_path(self, start: np.ndarray, goal: np.ndarray, acceleration: float) -> np.ndarray:
         """The joint targets ``joint_move`` sends, one per control step, for its move from ``start`` to ``goal``."""
         with self._speed(1.0, acceleration):
-            return self.paced(self._timed_path(start, goal), start)
+            return self.paced(self._timed_path(start, goal), start, acceleration)
 
     def joint_move_end(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where ``joint_move(goal)`` from ``start`` leaves the arm: ``goal``, unless the oracle acts through a TCP
@@ -511,23 +515,27 @@ class Oracle(Policy):
         for qpos in positions:
             yield np.hstack([qpos, self.gripper]).astype(np.float32)
 
-    def paced(self, positions: np.ndarray, start: Optional[np.ndarray] = None) -> np.ndarray:
-        """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step) as
-        the oracle sends them: retimed to ``tcp_pace`` where set, else slowed where the TCP would outrun
-        ``tcp_speed_limit``."""
+    def paced(self, positions: np.ndarray, start: Optional[np.ndarray] = None, acceleration: float = 1.0) -> np.ndarray:
+        """``positions`` (a joint path from ``start``, the arm's joints now by default, one target per control step, planned
+        at ``acceleration`` times the usual joint accelerations) as the oracle sends them: retimed to ``tcp_pace`` where
+        set, else slowed where the TCP would outrun ``tcp_speed_limit`` (``free_space_translation_scale`` times its
+        translation for a motion at more than the usual accelerations)."""
         start = self.arm_qpos() if start is None else np.asarray(start)
         if self.tcp_pace is not None:
             return self._retimed_to_tcp_pace(positions, start)
         if self.tcp_speed_limit is not None:
-            return self._slowed_to_speed_limit(positions, start)
+            metres, radians = self.tcp_speed_limit
+            if acceleration > 1.0:
+                metres *= self.free_space_translation_scale
+            return self._slowed_to_speed_limit(positions, start, (metres, radians))
         return positions
 
-    def _slowed_to_speed_limit(self, positions: np.ndarray, start: np.ndarray) -> np.ndarray:
+    def _slowed_to_speed_limit(self, positions: np.ndarray, start: np.ndarray, limit: tuple[float, float]) -> np.ndarray:
         """``positions`` (from ``start``) resampled along the same path with every step
-        that would move the TCP farther than ``tcp_speed_limit`` stretched to as many steps as the limit needs (the
+        that would move the TCP farther than ``limit`` (metres, radians) stretched to as many steps as the limit needs (the
         other steps keep their timing)."""
         path = np.concatenate([start[None], positions])
-        durations = np.maximum(1.0, self._paces(*self._tcp_poses(path), pace=self.tcp_speed_limit))
+        durations = np.maximum(1.0, self._paces(*self._tcp_poses(path), pace=limit))
         times = np.concatenate([[0.0], np.cumsum(durations)])
         if times[-1] <= len(positions) + 1e-9:  # nothing to slow
             return positions
