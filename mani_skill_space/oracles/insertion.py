@@ -286,11 +286,9 @@ class PegInserter:
         # all the checked grasps together (those lifting the peg straight up first, then the others), then each
         # unchecked last resort on its own
         checked = [c for c in candidates if c[1]]
-        last_resorts = [([c], None, False) for c in candidates if not c[1]]
-        groups = [(checked, True, False), (checked, False, False)] + last_resorts
-        if getattr(self.oracle, "moves_in_straight_lines", False):  # straight swings first
-            straight = lambda groups: [(group, lift, True) for group, lift, _ in groups]  # noqa: E731
-            groups = straight(groups[:2]) + groups
+        groups = [(checked, True, False), (checked, False, False)] + [([c], None, False) for c in candidates if not c[1]]
+        if getattr(self.oracle, "moves_in_straight_lines", False):  # the checked grasps with straight swings first
+            groups = [(checked, True, True), (checked, False, True)] + groups
         for group, straight_lift, straight_swing in groups:
             plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift, straight_swing)
             if straight_swing:  # first choice only where its push keeps the margin asked for
