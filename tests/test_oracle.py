@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import _finger_box_corners, _trapezoid
+from mani_skill_space.oracles.base import Oracle, _finger_box_corners, _trapezoid
 from mani_skill_space.oracles.debris_capture import FAST_SWING
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
@@ -406,7 +406,7 @@ class _StraightLinesOverTheHole(_ArmsOverTheHole):
         super().__init__(arms_and_margins)
         self.line_end = line_end
 
-    def straight_line_path(self, start, pose):
+    def straight_line_path(self, start, pose, acceleration=1.0):
         return None if self.line_end is None else np.repeat(self.line_end[None], 3, axis=0)
 
     def joint_move_end(self, start, goal):
@@ -618,3 +618,70 @@ def test_the_line_up_prefers_a_push_clear_of_the_joint_limits_then_the_first_fea
     swing, twist = planner._line_up(target, 0, 0.0)
     np.testing.assert_array_equal(swing.arm, chosen)
     assert twist == pytest.approx(chosen[0] * np.pi / 2)
+
+
+class _PathsWithoutScrew(Oracle):
+    """A stand-in oracle acting through a TCP controller whose straight line, shortest arc round the base and joint move
+    to a pose take the given numbers of steps (None: there is none), each path filled with its own marker."""
+
+    tcp_speed_limit = (0.03, 0.05)
+    MARKERS = {"line": 1.0, "arc": 2.0, "joint": 3.0, "screw": 4.0}
+
+    def __init__(self, **steps):
+        self.steps = {"screw": None, **steps}
+
+    def _screw_path(self, start, pose):
+        return self._path("screw")
+
+    def _path(self, kind):
+        return None if self.steps[kind] is None else np.full((self.steps[kind], 7), self.MARKERS[kind])
+
+    def straight_line_path(self, start, pose, acceleration=1.0):
+        return self._path("line")
+
+    def arcs_round_base(self, start, pose, acceleration=1.0):
+        return [] if self.steps["arc"] is None else [self._path("arc")]
+
+    def free_joint_goal(self, start, pose):
+        return None if self.steps["joint"] is None else np.full(7, self.MARKERS["joint"])
+
+    def _timed_path(self, start, goal):
+        return self._path("joint")
+
+    def paced(self, positions, start=None, acceleration=1.0):
+        return positions
+
+
+@pytest.mark.parametrize(
+    "line, arc, joint, chosen",
+    [
+        (20, 40, 129, "line"),  # a straight line of the hand, where there is one
+        (None, 40, 129, "arc"),  # else the quicker of the arc round the base...
+        (None, 60, 30, "joint"),  # ...and the joint move
+        (None, None, 30, "joint"),
+        (None, 40, None, "arc"),
+        (None, None, None, None),
+    ],
+)
+def test_without_a_screw_motion_the_hand_takes_its_line_else_the_quicker_of_arc_and_joint_move(line, arc, joint, chosen):
+    oracle = _PathsWithoutScrew(line=line, arc=arc, joint=joint)
+    path = oracle._path_without_screw(np.zeros(7), sapien.Pose())
+    if chosen is None:
+        assert path is None
+    else:
+        assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
+
+
+@pytest.mark.parametrize(
+    "screw, arc, acceleration, chosen",
+    [
+        (60, 30, 2.0, "arc"),  # a brisk motion takes the arc round the base where it is quicker than the screw
+        (60, 30, 1.0, "screw"),  # ...a motion at the usual pace keeps the screw
+        (20, 30, 2.0, "screw"),
+        (None, 30, 1.0, "arc"),  # no screw: _path_without_screw
+    ],
+)
+def test_a_brisk_motion_goes_round_the_base_where_that_is_quicker_than_its_screw(screw, arc, acceleration, chosen):
+    oracle = _PathsWithoutScrew(screw=screw, line=None, arc=arc, joint=None)
+    path = oracle._motion_path(np.zeros(7), sapien.Pose(), acceleration)
+    assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]

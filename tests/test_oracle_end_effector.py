@@ -14,6 +14,7 @@ from mani_skill_space.oracles.end_effector import (
     ROTATION_SPEED_FRACTION,
     TRANSLATION_SPEED_FRACTION,
     EndEffectorDeltaPose,
+    arc_round_base,
     arm_delta_controller,
     delta_action_to,
     speed_limit,
@@ -210,3 +211,49 @@ def test_a_straight_line_of_the_hand_is_followed_within_the_speed_limit(ee_env):
     np.testing.assert_allclose(positions[-1], goal.p, atol=0.005)
     assert (rotations[-1].inv() * Rotation.from_quat(np.roll(goal.q, -1))).magnitude() < 0.05
     assert oracle.straight_line_path(start, sapien.Pose(hand.p + [1.5, 0.0, 0.0], hand.q)) is None
+
+
+def _wxyz(rotation):
+    return np.roll(rotation.as_quat(), 1)
+
+
+@pytest.mark.parametrize("way", [1, -1])
+@pytest.mark.parametrize("carried", [False, True])
+def test_an_arc_round_the_base_sweeps_the_way_asked_within_the_limits(way, carried):
+    """``arc_round_base``: from behind the base (azimuth 170 deg) to in front of it (-30 deg), the hand's azimuth moves
+    evenly the way asked (+1 anticlockwise, 160 deg; -1 clockwise, 200 deg), its distance from the axis and
+    height evenly, each step within the limits, and the last pose is the goal; a carried hand keeps its orientation
+    relative to the sweep, plus an even turn for the rest."""
+    start_rotation, goal_rotation = Rotation.from_euler("xyz", [np.pi, 0.0, 1.2]), Rotation.from_euler("xyz", [np.pi - 0.5, 0.4, -0.3])
+    start = (np.array([0.35 * np.cos(np.radians(170)), 0.35 * np.sin(np.radians(170)), 0.35]), _wxyz(start_rotation))
+    goal = (np.array([0.55 * np.cos(np.radians(-30)), 0.55 * np.sin(np.radians(-30)), 0.3]), _wxyz(goal_rotation))
+    limit = (0.05, 0.05)
+    hands = arc_round_base(start, goal, way, carried, limit)
+    positions = np.stack([start[0]] + [p for p, _ in hands])
+    rotations = Rotation.from_quat(np.stack([np.roll(start[1], -1)] + [np.roll(q, -1) for _, q in hands]))
+    azimuths = np.unwrap(np.arctan2(positions[:, 1], positions[:, 0]))
+    sweep = np.radians(160.0) if way > 0 else np.radians(-200.0)
+    np.testing.assert_allclose(np.diff(azimuths), sweep / len(hands), atol=1e-9)
+    np.testing.assert_allclose(np.diff(np.hypot(positions[:, 0], positions[:, 1])), 0.2 / len(hands), atol=1e-9)
+    np.testing.assert_allclose(np.diff(positions[:, 2]), -0.05 / len(hands), atol=1e-9)
+    assert np.linalg.norm(np.diff(positions, axis=0), axis=1).max() <= limit[0] + 1e-9
+    turns = np.array([(a.inv() * b).magnitude() for a, b in zip(rotations[:-1], rotations[1:])])
+    assert turns.max() <= limit[1] + 1e-9
+    np.testing.assert_allclose(positions[-1], goal[0], atol=1e-9)
+    assert (rotations[-1].inv() * goal_rotation).magnitude() < 1e-6
+    relative = Rotation.from_euler("z", -azimuths[:, None]) * rotations  # the hand's orientation in the sweep's frame
+    # carried: a turn about one axis on top of the sweep; else a turn about one axis of its own
+    assert _about_one_axis(relative) == carried
+    assert _about_one_axis(rotations) != carried
+
+
+def _about_one_axis(rotations) -> bool:
+    axes = (rotations[0].inv() * rotations[1:]).as_rotvec()
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    return bool(np.allclose(axes, axes[0], atol=1e-6))
+
+
+def test_an_arc_round_the_base_asks_for_a_way_round():
+    hand = (np.array([0.3, 0.0, 0.3]), np.array([1.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="way must be"):
+        arc_round_base(hand, hand, 0, False, (0.05, 0.05))

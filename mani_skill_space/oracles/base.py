@@ -72,15 +72,22 @@ class Oracle(Policy):
     joint path (arm joints at each step) from a start (``(start, path)``; None where it stalls): a TCP controller follows
     the hand's pose, not the joints, and its IK, re-solved from the joints as they are, settles the arm's redundancy
     its own way (``joint_move_end``)."""
-    line_follower: Optional[Callable[[np.ndarray, sapien.Pose], Optional[np.ndarray]]] = None
-    """Where set (``oracles.end_effector`` sets it), the arm joint targets, one per control step within
-    ``tcp_speed_limit``, along which a TCP controller takes the hand in a straight line (moving evenly, turning evenly
-    about one axis) from where arm joints ``start`` put it to a pose (world frame), given ``(start, pose)``; None where
-    it stalls short of the pose (``straight_line_path``)."""
+    line_follower: Optional[Callable[[np.ndarray, sapien.Pose, tuple[float, float]], Optional[np.ndarray]]] = None
+    """Where set (``oracles.end_effector`` sets it), the arm joint targets, one per control step within a speed limit,
+    along which a TCP controller takes the hand in a straight line (moving evenly, turning evenly about one axis) from
+    where arm joints ``start`` put it to a pose (world frame), given ``(start, pose, limit)`` (``limit``: metres,
+    radians per step); None where it stalls short of the pose (``straight_line_path``)."""
+    arc_follower: Optional[Callable[[np.ndarray, sapien.Pose, tuple[float, float], int, bool], Optional[np.ndarray]]] = None
+    """Where set (``oracles.end_effector`` sets it), the arm joint targets, one per control step within a speed limit,
+    along which a TCP controller takes the hand round the arm's base (its first joint's axis), given ``(start, pose,
+    limit, way, carried)`` (``way``: +1 anticlockwise seen from above, -1 clockwise; ``carried``: the hand turned
+    round with the sweep, as the first joint carries it, as well as evenly to its goal orientation); None where it
+    stalls short of the pose (``arcs_round_base``)."""
     straight_lines_under_tcp_control: bool = False
     """Whether, acting through a TCP controller (``line_follower`` set), the oracle moves the hand in straight lines
-    (``straight_line_path``) where mplib's screw motion has no path and, in the motions that ask for one, instead of a
-    joint-space swing. That controller follows the hand's poses, so a joint-space move to another IK solution makes it
+    (``straight_line_path``) where mplib's screw motion has no path (where there is no line either, round the arm's
+    base, ``arcs_round_base``, if that is quicker than a joint-space move) and, in the motions that ask for one,
+    instead of a joint-space swing. That controller follows the hand's poses, so a joint-space move to another IK solution makes it
     take the hand along the whole whirl of the joints (procedural peg, Moon, seed 6045: 5.9 rad of turning and 0.86 m
     of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion stops at the first
     joint limit its Jacobian steps run into, where the controller's IK, stepped along the line, gets round it. Solar
@@ -179,8 +186,7 @@ class Oracle(Policy):
         return np.hstack([self.arm_qpos(), self.gripper]).astype(np.float32)
 
     def screw_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0, speed: float = 1.0, acceleration: float = 1.0) -> Iterator[np.ndarray]:
-        """Screw motion of the TCP to ``pose`` (or, where there is none, its straight line there where the oracle moves
-        in them, ``straight_line_path``, else a joint-space move to the nearest collision-free IK solution) at ``speed``
+        """Motion of the TCP to ``pose`` (``_motion_path``: a screw motion, as a rule) at ``speed``
         times the usual joint limits (and ``acceleration`` times the usual accelerations, on top); ``settle_steps`` more
         steps hold the goal so the arm catches up."""
         self.phase = what
@@ -191,11 +197,9 @@ class Oracle(Policy):
             if correction and np.linalg.norm(self.tcp_pose().p - pose.p) < FREE_FLYER_TOLERANCE:
                 break
             with self._speed(speed, acceleration):
-                positions = self._screw_path(self.arm_qpos(), pose)
+                positions = self._motion_path(self.arm_qpos(), pose, acceleration)
                 if positions is None:
-                    positions = self.straight_line_path(self.arm_qpos(), pose)
-                if positions is None:
-                    positions = self._joint_path(pose, what)
+                    raise PlanningFailed(f"no motion to the {what} pose")
             yield from self._follow(self.paced(positions, acceleration=acceleration), retime=False)
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
 
@@ -241,12 +245,37 @@ class Oracle(Policy):
         finally:
             planner.joint_vel_limits, planner.joint_acc_limits = velocity, acceleration
 
-    def _joint_path(self, pose: sapien.Pose, what: str) -> np.ndarray:
-        start = self.arm_qpos()
+    def _motion_path(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """The joint path of ``screw_to``'s motion from ``start`` to ``pose`` (within ``_speed``): mplib's screw motion,
+        else ``_path_without_screw``; for a brisk motion (``acceleration`` above 1) of an oracle moving in straight
+        lines, the hand's arc round the arm's base instead where that is quicker than the screw (a screw from one side
+        of the base to the other folds the arm over rather than turning it round, and the next long motion from there
+        must turn the hand about as far: traced on Solar Panel Assembly, Moon, seed 6018, the panel's pre-grasp and
+        swing took 65 and 62 steps); None if there is no motion."""
+        screw = self._screw_path(start, pose)
+        if screw is None:
+            return self._path_without_screw(start, pose, acceleration)
+        if acceleration > 1.0:
+            arcs = self.arcs_round_base(start, pose, acceleration)
+            if arcs and len(arcs[0]) < len(self.paced(screw, start, acceleration)):
+                return arcs[0]
+        return screw
+
+    def _path_without_screw(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where mplib's screw motion has no path from ``start`` to ``pose``: the hand's straight line there where the
+        oracle moves in them (``straight_line_path``); where there is none, the quicker (paced at ``acceleration``) of
+        the hand's arc round the arm's base (``arcs_round_base``: from one side of the base to the other, a joint-space
+        move may whirl the hand round for 130 steps where the arc takes 40) and the joint-space move to the nearest
+        collision-free IK solution; None if there is neither."""
+        line = self.straight_line_path(start, pose, acceleration)
+        if line is not None:
+            return line
         goal = self.free_joint_goal(start, pose)
-        if goal is None:
-            raise PlanningFailed(f"no motion to the {what} pose")
-        return self._timed_path(start, goal)
+        joint = None if goal is None else self._timed_path(start, goal)  # screw_to paces it
+        arcs = self.arcs_round_base(start, pose, acceleration)
+        if arcs and (joint is None or len(arcs[0]) < len(self.paced(joint, start, acceleration))):
+            return arcs[0]
+        return joint
 
     def free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """The IK solution for ``pose`` nearest ``start`` that a straight joint move from ``start`` reaches
@@ -256,27 +285,42 @@ class Oracle(Policy):
                 return goal
         return None
 
-    def motion_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
-        """Where ``screw_to(pose)`` from ``start`` would leave the arm (its screw motion, else its straight line, else its
-        joint move), or None if it would fail: for checking a whole plan before moving."""
-        end = self.screw_end(start, pose)
-        if end is None:
-            line = self.straight_line_path(start, pose)
-            end = None if line is None else line[-1]
-        return end if end is not None else self.free_joint_goal(start, pose)
+    def motion_end(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where ``screw_to(pose, acceleration=acceleration)`` from ``start`` would leave the arm (``_motion_path``), or None
+        if it would fail: for checking a whole plan before moving."""
+        with self._speed(1.0, acceleration):
+            path = self._motion_path(start, pose, acceleration)
+        return None if path is None else path[-1][: len(start)]
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
         positions = self._screw_path(start, pose)
         return None if positions is None else positions[-1][: len(start)]
 
-    def straight_line_path(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+    def straight_line_path(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where the oracle moves in straight lines (``moves_in_straight_lines``), the arm joint targets that take the hand
         in a straight line from where ``start`` puts it to ``pose``, if the controller gets there with the arm clear of
-        collisions all the way; else None."""
+        collisions all the way; else None. The hand goes as fast as ``paced`` lets a motion at ``acceleration``."""
         if not self.moves_in_straight_lines:
             return None
-        path = self.line_follower(start, pose)
+        return self._free_hand_path(start, self.line_follower(start, pose, self.tcp_step_limit(acceleration)))
+
+    def arcs_round_base(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> list[np.ndarray]:
+        """Where the oracle moves in straight lines (``moves_in_straight_lines``), the arm joint targets that take the hand
+        round the arm's base to ``pose``, each way round and with the hand turning evenly from its orientation to the
+        pose's or carried round with the sweep as well, that the controller follows with the arm clear of collisions
+        all the way, the shorter first; as fast as ``paced`` lets a motion at ``acceleration``. For a hand that must go
+        from one side of the base to the other, where the straight line between would pass over the base."""
+        if not self.moves_in_straight_lines or self.arc_follower is None:
+            return []
+        limit = self.tcp_step_limit(acceleration)
+        arcs = [self.arc_follower(start, pose, limit, way, carried) for way in (1, -1) for carried in (False, True)]
+        paths = [self._free_hand_path(start, arc) for arc in arcs]
+        return sorted((path for path in paths if path is not None), key=len)
+
+    def _free_hand_path(self, start: np.ndarray, path: Optional[np.ndarray]) -> Optional[np.ndarray]:
+        """``path`` (arm joint targets from ``start``, one per control step) if the arm keeps clear of collisions between
+        each and the next, else None (None stays None)."""
         if path is None:
             return None
         waypoints = np.concatenate([np.asarray(start)[None], path])
@@ -476,7 +520,7 @@ class Oracle(Policy):
         as the arm goes); PlanningFailed if it can reach none."""
         start = self.arm_qpos()
         for pose in poses:
-            if self.motion_end(start, pose) is not None:
+            if self.motion_end(start, pose, motion.get("acceleration", 1.0)) is not None:
                 yield from self.screw_to(pose, what, **motion)
                 return
         raise PlanningFailed(f"no motion to the {what} pose")
@@ -524,11 +568,15 @@ class Oracle(Policy):
         if self.tcp_pace is not None:
             return self._retimed_to_tcp_pace(positions, start)
         if self.tcp_speed_limit is not None:
-            metres, radians = self.tcp_speed_limit
-            if acceleration > 1.0:
-                metres *= self.free_space_translation_scale
-            return self._slowed_to_speed_limit(positions, start, (metres, radians))
+            return self._slowed_to_speed_limit(positions, start, self.tcp_step_limit(acceleration))
         return positions
+
+    def tcp_step_limit(self, acceleration: float = 1.0) -> tuple[float, float]:
+        """(metres, radians): how far the TCP may move and turn in a control step in a motion planned at
+        ``acceleration`` times the usual joint accelerations: ``tcp_speed_limit``, its translation
+        ``free_space_translation_scale`` times farther for a brisk (free-space) motion."""
+        metres, radians = self.tcp_speed_limit
+        return (metres * self.free_space_translation_scale if acceleration > 1.0 else metres), radians
 
     def _slowed_to_speed_limit(self, positions: np.ndarray, start: np.ndarray, limit: tuple[float, float]) -> np.ndarray:
         """``positions`` (from ``start``) resampled along the same path with every step

@@ -65,6 +65,7 @@ class EndEffectorDeltaPose(WrapsOracle):
         self.oracle.tcp_speed_limit = speed_limit(self.controller)
         self.oracle.arm_follower = self.followed_end
         self.oracle.line_follower = self.line_path
+        self.oracle.arc_follower = self.arc_path
         self.oracle.reset(env, seed)
 
     def act(self, obs) -> np.ndarray:
@@ -80,19 +81,28 @@ class EndEffectorDeltaPose(WrapsOracle):
         followed = self._followed(start, [self.tcp_pose_at_base(target) for target in path])
         return None if followed is None else followed[-1]
 
-    def line_path(self, start: np.ndarray, goal: sapien.Pose) -> Optional[np.ndarray]:
+    def line_path(self, start: np.ndarray, goal: sapien.Pose, limit: Optional[tuple[float, float]] = None) -> Optional[np.ndarray]:
         """Arm joint targets, one per control step, that take the hand in a straight line from where ``start`` puts it
-        to ``goal`` (world frame): its position moved and its orientation turned (about one axis) evenly, as fast as the
-        oracle's speed limit allows, each target the controller's own IK (``_followed``); None where the controller
-        stalls short of ``goal``."""
+        to ``goal`` (world frame): its position moved and its orientation turned (about one axis) evenly, as fast as
+        ``limit`` (metres, radians per step; the oracle's speed limit by default) allows, each target the controller's
+        own IK (``_followed``); None where the controller stalls short of ``goal``."""
         base_goal = self.controller.articulation.pose.sp.inv() * goal
         position, quaternion = self.tcp_pose_at_base(start)
         rotations = Rotation.from_quat(np.stack([np.roll(quaternion, -1), np.roll(base_goal.q, -1)]))  # wxyz -> xyzw
-        metres, radians = self.oracle.tcp_speed_limit
+        metres, radians = self.oracle.tcp_speed_limit if limit is None else limit
         distance, turn = np.linalg.norm(base_goal.p - position), (rotations[0].inv() * rotations[1]).magnitude()
         fractions = np.linspace(0.0, 1.0, max(1, int(np.ceil(max(distance / metres, turn / radians)))) + 1)[1:]
         turned = Slerp([0.0, 1.0], rotations)(fractions).as_quat()
         hands = [(position + t * (base_goal.p - position), np.roll(q, 1)) for t, q in zip(fractions, turned)]
+        return self._followed(start, hands)
+
+    def arc_path(self, start: np.ndarray, goal: sapien.Pose, limit: tuple[float, float], way: int, carried: bool) -> Optional[np.ndarray]:
+        """Arm joint targets, one per control step, that take the hand round the arm's base from where ``start`` puts it
+        to ``goal`` (world frame), ``way`` round (+1: anticlockwise seen from above, -1: clockwise), its orientation
+        ``carried`` round with the sweep or not (``arc_round_base``), within ``limit`` (metres, radians per step), each
+        target the controller's own IK (``_followed``); None where the controller stalls short of ``goal``."""
+        base_goal = self.controller.articulation.pose.sp.inv() * goal
+        hands = arc_round_base(self.tcp_pose_at_base(start), (base_goal.p, base_goal.q), way, carried, limit)
         return self._followed(start, hands)
 
     def _followed(self, start: np.ndarray, hands: list) -> Optional[np.ndarray]:
@@ -122,6 +132,36 @@ class EndEffectorDeltaPose(WrapsOracle):
         self.model.compute_forward_kinematics(qpos)
         pose = self.model.get_link_pose(self.controller.ee_link.index)
         return np.asarray(pose.p), np.asarray(pose.q)
+
+
+def arc_round_base(start: tuple[np.ndarray, np.ndarray], goal: tuple[np.ndarray, np.ndarray], way: int, carried: bool, limit: tuple[float, float]) -> list:
+    """Hand poses ((position, wxyz quaternion) in the arm's base frame), one per control step, from ``start`` round the
+    base's vertical axis to ``goal``: the azimuth swept ``way`` round (+1 anticlockwise seen from above, -1 clockwise),
+    the distance from the axis and the height changed evenly; the hand turned evenly about one axis from its start to
+    its goal orientation, on top of being turned with the sweep as the arm's first joint carries it where ``carried``;
+    as many steps as ``limit`` (metres, radians per step) asks for the turn and for the arc where it is widest."""
+    if way not in (1, -1):
+        raise ValueError(f"way must be +1 or -1, got {way!r}")
+    (position, quaternion), (goal_position, goal_quaternion) = start, goal
+    azimuth = np.arctan2(position[1], position[0])
+    ahead = (np.arctan2(goal_position[1], goal_position[0]) - azimuth) % (2.0 * np.pi)  # anticlockwise, in [0, 2 pi)
+    sweep = ahead if way > 0 else ahead - 2.0 * np.pi
+    radius, goal_radius = np.hypot(*position[:2]), np.hypot(*goal_position[:2])
+
+    def positions(fractions: np.ndarray) -> np.ndarray:
+        angles, radii = azimuth + sweep * fractions, radius + (goal_radius - radius) * fractions
+        heights = position[2] + (goal_position[2] - position[2]) * fractions
+        return np.stack([radii * np.cos(angles), radii * np.sin(angles), heights], axis=1)
+
+    carry = sweep if carried else 0.0
+    turned = Rotation.from_quat(np.stack([np.roll(quaternion, -1), np.roll(goal_quaternion, -1)]))  # wxyz -> xyzw
+    rest = Rotation.concatenate([turned[0], Rotation.from_euler("z", -carry) * turned[1]])  # the goal turned back by the carry
+    fastest = np.linalg.norm([max(radius, goal_radius) * sweep, goal_radius - radius, goal_position[2] - position[2]])  # m per unit of the sweep's progress, at its widest
+    turn = abs(carry) + (rest[0].inv() * rest[1]).magnitude()
+    metres, radians = limit
+    fractions = np.linspace(0.0, 1.0, max(1, int(np.ceil(max(fastest / metres, turn / radians)))) + 1)[1:]
+    rotations = Rotation.from_euler("z", (carry * fractions)[:, None]) * Slerp([0.0, 1.0], rest)(fractions)
+    return [(p, np.roll(q, 1)) for p, q in zip(positions(fractions), rotations.as_quat())]
 
 
 def arm_delta_controller(env) -> PDEEPoseController:

@@ -174,6 +174,11 @@ class InsertionSettings:
     pre_grasp_acceleration: float = 1.0
     """Joint accelerations, as a multiple of the oracle's usual ones, of the empty hand's motion to the pre-grasp
     pose."""
+    carry_acceleration_under_tcp_control: float = 1.0
+    """For an oracle acting through a TCP controller (``pd_ee_delta_pose``), joint accelerations, as a multiple of the
+    oracle's usual ones, of the held peg's lift and of the straight line that carries it over the hole at the lift
+    height (``_straight_swing``): at more than 1 the hand moves ``Oracle.free_space_translation_scale`` times farther a
+    step there. The line down to the entrance keeps the usual pace, and so does every motion in joint control."""
     push_margin_under_tcp_control: bool = False
     """Whether an oracle acting through a TCP controller (``pd_ee_delta_pose``) also prefers pushes that keep
     ``PUSH_JOINT_MARGIN`` from the joint limits (``PegInserter.push_joint_margin``)."""
@@ -206,6 +211,11 @@ class PegInserter:
             return PUSH_JOINT_MARGIN
         return -np.inf
 
+    @property
+    def carry_acceleration(self) -> float:
+        """``carry_acceleration_under_tcp_control`` for an oracle whose TCP speed is limited, else 1."""
+        return self.settings.carry_acceleration_under_tcp_control if self.oracle.tcp_speed_limit is not None else 1.0
+
     def _reaching(self):
         """Plan with the ``reach_obstacles`` too, inside the block."""
         if self.reach_obstacles is None:
@@ -223,7 +233,7 @@ class PegInserter:
             yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
             yield from self.oracle.set_gripper(GRIPPER_CLOSED)
             yield from self.oracle.wait_for_grasp(target.peg, "the peg")
-            yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift")
+            yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
 
         for attempt in range(self.settings.insert_attempts):
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
@@ -373,7 +383,7 @@ class PegInserter:
         lift is not (``straight_lift`` True) or is (False) a straight screw motion up. Where there is none, the lift is
         a joint-space move to another configuration of the arm, which can whirl the peg out of the fingers; a grasp
         whose lift is straight was already planned with the straight ones, so False leaves it out."""
-        arm = self.oracle.motion_end(start, backed_off(grasp, PRE_GRASP_DISTANCE))
+        arm = self.oracle.motion_end(start, backed_off(grasp, PRE_GRASP_DISTANCE), self.settings.pre_grasp_acceleration)
         arm = None if arm is None else self.oracle.motion_end(arm, grasp)
         if arm is None:
             return None
@@ -446,8 +456,8 @@ class PegInserter:
         over = self._hand_over_hole(target, twist, tip_in_hand, target.depth + approach_gap)
         high = at_height(over, max(self.settings.lift_height, float(over.p[2])))
         paths, arm = [], start
-        for pose in (high, over):
-            path = self.oracle.straight_line_path(arm, pose)
+        for pose, acceleration in ((high, self.carry_acceleration), (over, 1.0)):
+            path = self.oracle.straight_line_path(arm, pose, acceleration)
             if path is None:
                 return None
             paths.append(path)

@@ -56,7 +56,7 @@ PLACE_PRESS = 0.004
 
 PEG_INSERTION = InsertionSettings(
     lift_height=PEG_LIFT_HEIGHT, relax_steps=6, insert_attempts=2, insert_step=0.004, refine_passes=1, pre_grasp_acceleration=FREE_SPACE_ACCELERATION,
-    push_margin_under_tcp_control=True,
+    push_margin_under_tcp_control=True, carry_acceleration_under_tcp_control=FREE_SPACE_ACCELERATION,
 )
 """Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg; the push eases off before
 letting go (in orbit a peg let go while pressed into its socket springs back out of it), and a jammed push is
@@ -151,25 +151,29 @@ class SolarPanelOracle(Oracle):
 
     def _swing_over_target(self, env) -> Iterator[np.ndarray]:
         """The panel swung high above its seat (the first of SWING_GAPS, either way round, that the arm reaches with the
-        panel kept clear): by a straight line of the hand where the oracle moves in them and there is one
-        (``Oracle.straight_line_path``), else by a straight joint move."""
+        panel kept clear), by a straight joint move; where the oracle moves in straight lines, by the quickest of that
+        and the hand's paths there, a straight line (``Oracle.straight_line_path``) or an arc round the arm's base
+        (``Oracle.arcs_round_base``: the panel lies behind the base and its target in front, and from some grasps the
+        joint move whirls the hand round for 120-130 steps)."""
         start = self.arm_qpos()
         panel_in_tcp, half_extents = self._held_panel_box(env)
         for gap in SWING_GAPS:
+            moves = []  # (what to send: a hand path, or an arm goal for a joint move; in how many steps)
             for half_turns in (0, 1):
                 pose = self._tcp_for_seat(env, gap, half_turns)
-                line = self.straight_line_path(start, pose)
-                if line is not None and self._line_keeps_held_box_clear(start, line, panel_in_tcp, half_extents):
-                    yield from self.follow(line, "over the target")
-                    return
-                for arm in self.ik_solutions(pose):
-                    if self.path_is_free(start, arm) and self.path_keeps_held_box_clear(start, arm, panel_in_tcp, half_extents):
-                        yield from self.joint_move(arm, "over the target", FREE_SPACE_ACCELERATION)
-                        return
+                hand_paths = [self.straight_line_path(start, pose, FREE_SPACE_ACCELERATION)] + self.arcs_round_base(start, pose, FREE_SPACE_ACCELERATION)
+                moves += [(("path", path), len(path)) for path in hand_paths if path is not None and self._hand_path_keeps_held_box_clear(start, path, panel_in_tcp, half_extents)]
+                arm = next((arm for arm in self.ik_solutions(pose) if self.path_is_free(start, arm) and self.path_keeps_held_box_clear(start, arm, panel_in_tcp, half_extents)), None)
+                if arm is not None:
+                    moves.append((("joint", arm), len(self._joint_move_path(start, arm, FREE_SPACE_ACCELERATION))))
+            if moves:
+                (kind, move), _ = min(moves, key=lambda move: move[1]) if self.moves_in_straight_lines else moves[0]
+                yield from self.follow(move, "over the target") if kind == "path" else self.joint_move(move, "over the target", FREE_SPACE_ACCELERATION)
+                return
         raise PlanningFailed("no arm configuration holds the panel over its target")
 
-    def _line_keeps_held_box_clear(self, start: np.ndarray, line: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray) -> bool:
-        waypoints = np.concatenate([start[None], line])
+    def _hand_path_keeps_held_box_clear(self, start: np.ndarray, path: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray) -> bool:
+        waypoints = np.concatenate([start[None], path])
         return all(self.path_keeps_held_box_clear(a, b, box_in_tcp, half_extents, samples=2) for a, b in zip(waypoints, waypoints[1:]))
 
     def _held_panel_box(self, env) -> tuple[np.ndarray, np.ndarray]:
