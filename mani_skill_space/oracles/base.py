@@ -87,12 +87,12 @@ class Oracle(Policy):
     """Whether, acting through a TCP controller (``line_follower`` set), the oracle moves the hand in straight lines
     (``straight_line_path``) where mplib's screw motion has no path (where there is no line either, round the arm's
     base, ``arcs_round_base``, if that is quicker than a joint-space move) and, in the motions that ask for one,
-    instead of a joint-space swing. That controller follows the hand's poses, so a joint-space move to another IK solution makes it
-    take the hand along the whole whirl of the joints (procedural peg, Moon, seed 6045: 5.9 rad of turning and 0.86 m
-    of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion stops at the first
-    joint limit its Jacobian steps run into, where the controller's IK, stepped along the line, gets round it. Solar
-    Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single peg's did not gain (see
-    the README's *Straight lines of the hand*)."""
+    instead of a joint-space swing. That controller follows the hand's poses, so a joint-space move to another IK
+    solution makes it take the hand along the whole whirl of the joints (procedural peg, Moon, seed 6045: 5.9 rad of
+    turning and 0.86 m of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion
+    stops at the first joint limit its Jacobian steps run into, where the controller's IK, stepped along the line,
+    gets round it. Solar Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single
+    peg's did not gain (see the README's *Straight lines of the hand*)."""
     free_space_translation_scale: float = 1.0
     """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
     may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
