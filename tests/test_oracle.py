@@ -656,6 +656,7 @@ class _PathsWithoutScrew(Oracle):
     "line, arc, joint, chosen",
     [
         (20, 40, 129, "line"),  # a straight line of the hand, where there is one
+        (60, 40, 129, "line"),  # ...even where an arc would be quicker (it is checked first, and arcs cost more)
         (None, 40, 129, "arc"),  # else the quicker of the arc round the base...
         (None, 60, 30, "joint"),  # ...and the joint move
         (None, None, 30, "joint"),

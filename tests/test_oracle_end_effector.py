@@ -253,6 +253,16 @@ def _about_one_axis(rotations) -> bool:
     return bool(np.allclose(axes, axes[0], atol=1e-6))
 
 
+def test_an_arc_at_the_same_azimuth_takes_no_full_turn():
+    """A lift (start and goal at the same azimuth) is a short path either way round, not a full circle one way."""
+    start = (np.array([0.4, 0.1, 0.2]), _wxyz(Rotation.from_euler("x", np.pi)))
+    goal = (np.array([0.4, 0.1 - 1e-13, 0.5]), start[1])  # the same azimuth, up to rounding
+    for way in (1, -1):
+        hands = arc_round_base(start, goal, way, True, (0.05, 0.05))
+        assert len(hands) == 6
+        np.testing.assert_allclose([p[:2] for p, _ in hands], np.tile([0.4, 0.1], (6, 1)), atol=1e-12)
+
+
 def test_an_arc_round_the_base_asks_for_a_way_round():
     hand = (np.array([0.3, 0.0, 0.3]), np.array([1.0, 0.0, 0.0, 0.0]))
     with pytest.raises(ValueError, match="way must be"):

@@ -145,7 +145,9 @@ def arc_round_base(start: tuple[np.ndarray, np.ndarray], goal: tuple[np.ndarray,
     (position, quaternion), (goal_position, goal_quaternion) = start, goal
     azimuth = np.arctan2(position[1], position[0])
     ahead = (np.arctan2(goal_position[1], goal_position[0]) - azimuth) % (2.0 * np.pi)  # anticlockwise, in [0, 2 pi)
-    sweep = ahead if way > 0 else ahead - 2.0 * np.pi
+    if min(ahead, 2.0 * np.pi - ahead) < 1e-9:  # the same azimuth (a lift): no full turn either way round
+        ahead = 0.0
+    sweep = ahead if way > 0 or ahead == 0.0 else ahead - 2.0 * np.pi
     radius, goal_radius = np.hypot(*position[:2]), np.hypot(*goal_position[:2])
 
     def positions(fractions: np.ndarray) -> np.ndarray:

@@ -165,10 +165,13 @@ class SolarPanelOracle(Oracle):
                 hand_paths = [self.straight_line_path(start, pose, FREE_SPACE_ACCELERATION)] + self.arcs_round_base(start, pose, FREE_SPACE_ACCELERATION)
                 moves += [(("path", path), len(path)) for path in hand_paths if path is not None and self._hand_path_keeps_held_box_clear(start, path, panel_in_tcp, half_extents)]
                 arm = next((arm for arm in self.ik_solutions(pose) if self.path_is_free(start, arm) and self.path_keeps_held_box_clear(start, arm, panel_in_tcp, half_extents)), None)
+                if arm is not None and not self.moves_in_straight_lines:  # the first joint move, as it comes
+                    yield from self.joint_move(arm, "over the target", FREE_SPACE_ACCELERATION)
+                    return
                 if arm is not None:
                     moves.append((("joint", arm), len(self._joint_move_path(start, arm, FREE_SPACE_ACCELERATION))))
             if moves:
-                (kind, move), _ = min(moves, key=lambda move: move[1]) if self.moves_in_straight_lines else moves[0]
+                (kind, move), _ = min(moves, key=lambda move: move[1])
                 yield from self.follow(move, "over the target") if kind == "path" else self.joint_move(move, "over the target", FREE_SPACE_ACCELERATION)
                 return
         raise PlanningFailed("no arm configuration holds the panel over its target")
