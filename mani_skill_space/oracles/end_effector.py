@@ -81,15 +81,15 @@ class EndEffectorDeltaPose(WrapsOracle):
         followed = self._followed(start, [self.tcp_pose_at_base(target) for target in path])
         return None if followed is None else followed[-1]
 
-    def line_path(self, start: np.ndarray, goal: sapien.Pose, limit: Optional[tuple[float, float]] = None) -> Optional[np.ndarray]:
+    def line_path(self, start: np.ndarray, goal: sapien.Pose, limit: tuple[float, float]) -> Optional[np.ndarray]:
         """Arm joint targets, one per control step, that take the hand in a straight line from where ``start`` puts it
         to ``goal`` (world frame): its position moved and its orientation turned (about one axis) evenly, as fast as
-        ``limit`` (metres, radians per step; the oracle's speed limit by default) allows, each target the controller's
+        ``limit`` (metres, radians per step) allows, each target the controller's
         own IK (``_followed``); None where the controller stalls short of ``goal``."""
         base_goal = self.controller.articulation.pose.sp.inv() * goal
         position, quaternion = self.tcp_pose_at_base(start)
         rotations = Rotation.from_quat(np.stack([np.roll(quaternion, -1), np.roll(base_goal.q, -1)]))  # wxyz -> xyzw
-        metres, radians = self.oracle.tcp_speed_limit if limit is None else limit
+        metres, radians = limit
         distance, turn = np.linalg.norm(base_goal.p - position), (rotations[0].inv() * rotations[1]).magnitude()
         fractions = np.linspace(0.0, 1.0, max(1, int(np.ceil(max(distance / metres, turn / radians)))) + 1)[1:]
         turned = Slerp([0.0, 1.0], rotations)(fractions).as_quat()
