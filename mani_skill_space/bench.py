@@ -182,7 +182,8 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators["peg and hole pair (as the env draws it: solvability checks, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
-    generators["solar panel set (as the env draws it: solvability checks, redraws)"] = lambda seed: _reachable_solar_panel_set(seed, arm_base)
+    solar_mount = make_rover(cargo_bin=False)
+    generators["solar panel set (as the env draws it: solvability checks, redraws; the arm's planning cached on disk)"] = lambda seed: _reachable_solar_panel_set(seed, solar_mount)
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
@@ -194,8 +195,10 @@ def _solar_panel_set(seed: int) -> tuple:
     return make_socket_base(layout), make_solar_pegs(layout, seed), make_panel(layout)
 
 
-def _reachable_solar_panel_set(seed: int, arm_base) -> tuple:
-    layout, pegs = reachable_solar_set(seed, DEFAULT_CLEARANCE, arm_base)
+def _reachable_solar_panel_set(seed: int, mount) -> tuple:
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    layout, pegs = reachable_solar_set(seed, DEFAULT_CLEARANCE, mount, Panda.urdf_path)
     return make_socket_base(layout), pegs, make_panel(layout)
 
 

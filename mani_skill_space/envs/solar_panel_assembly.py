@@ -7,6 +7,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.envs.arm_reach import faces_the_arm_inserts, resting_rotations
 from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
@@ -22,10 +23,10 @@ from mani_skill_space.envs.insertion import (
     face_checks_of,
     feasibility_record,
     hole_in_peg_end,
-    insertable_faces,
     redrawn_seed,
     seated_pairs,
 )
+from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.geometry import pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
 from mani_skill_space.procgen.solar_panel import (
@@ -78,23 +79,46 @@ REWARD_TABLE = RewardTable(
 MAX_SET_DRAWS = 50
 
 
-def reachable_solar_set(seed: int, clearance: float, arm_base: np.ndarray) -> tuple:
+def reachable_solar_set(seed: int, clearance: float, mount: Asset, urdf_path: str) -> tuple:
     """The procedural layout and pegs of ``seed``, drawn again (deterministically) while some peg has no resting
-    face that passes the solvability checks (``envs.insertion.face_checks_of``: the arm can hold it over its socket,
-    and it lies tall enough to grip). The layout's ``feasibility`` dict (on the first peg's ``info``,
-    ``feasibility_record``) records how many draws it took and each socket's count of faces passing each check."""
-    origin = np.eye(4)
-    origin[:2, 3] = PANEL_TARGET_XY
+    face that passes the solvability checks (``solar_face_checks``) for the arm described by ``urdf_path`` on
+    ``mount``. The layout's ``feasibility`` dict (on the first peg's ``info``, ``feasibility_record``) records how
+    many draws it took and each socket's count of faces passing each check; each peg's ``info["insertable_faces"]``
+    lists the faces it may lie on."""
     for draw in range(MAX_SET_DRAWS):
         draw_seed = redrawn_seed(seed, draw)
         layout = make_solar_layout(draw_seed, clearance)
         pegs = make_solar_pegs(layout, draw_seed)
-        frames = socket_frames(layout)
-        checks = [face_checks_of(peg, origin @ frames[f"bottom_{i}"], arm_base) for i, peg in enumerate(pegs)]
+        checks = solar_face_checks(layout, pegs, mount, urdf_path)
         if all(bool(c["insertable"].any()) for c in checks):
             pegs[0].info["feasibility"] = feasibility_record(draw + 1, checks)
+            for peg, c in zip(pegs, checks):
+                peg.info["insertable_faces"] = c["insertable"].tolist()
             return layout, pegs
     raise RuntimeError(f"no procedural solar set the arm can assemble in {MAX_SET_DRAWS} draws from seed {seed}")
+
+
+def solar_face_checks(layout, pegs: list[Asset], mount: Asset, urdf_path: str) -> list[dict[str, torch.Tensor]]:
+    """Each peg's checks per resting face: ``envs.insertion.face_checks_of`` (``reachable``, ``grippable``), and
+    ``arm_inserts`` (``envs.arm_reach.faces_the_arm_inserts``, planned only for the faces that pass the others: the
+    arm takes the peg where it lies and pushes it into its socket with a grasp tilted at most 45 degrees);
+    ``insertable``: all of them."""
+    origin = np.eye(4)
+    origin[:2, 3] = PANEL_TARGET_XY
+    frames = socket_frames(layout)
+    arm_base = mount.frames["arm_mount"][:3, 3]
+    checks = []
+    for i, peg in enumerate(pegs):
+        bottom = origin @ frames[f"bottom_{i}"]
+        c = face_checks_of(peg, bottom, arm_base)
+        candidates = c["insertable"].numpy()
+        arm = np.zeros_like(candidates)
+        faces = resting_rotations(peg_placement([peg], "cpu"))
+        arm[candidates] = faces_the_arm_inserts(peg, faces[candidates], PEG_REST_XY[i], bottom, layout.depth, urdf_path, mount)
+        c["arm_inserts"] = torch.as_tensor(arm)
+        c["insertable"] = c["insertable"] & c["arm_inserts"]
+        checks.append(c)
+    return checks
 
 
 @register_env("SolarPanelAssembly-v1", max_episode_steps=1000)
@@ -115,10 +139,11 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       longer), sockets 20-30 mm deep with `clearance` (default 1 mm, at most 1.96 mm), and the panel's size (0.9-1.1x per side,
       the sockets and receptacles moving with it)
     - each peg lies on a random stable side within 1 cm of its place, its tip toward the arm within +-11 deg
-      (for procedural sets, only on a side that passes the solvability checks, `envs.insertion.face_checks_of`:
-      the arm can hold it over its socket, and the fingers can hold it there (at least 1 cm tall, not widest only
-      at its base); a set with a peg that
-      has none is drawn again, and the first peg's `info["feasibility"]` records the checks);
+      (for procedural sets, only on a side that passes the solvability checks, `solar_face_checks`: the arm can
+      hold it over its socket, the fingers can hold it there (at least 1 cm tall, not widest only at its base),
+      and the arm, planned with the agent's own model and the mount as an obstacle, takes it where it lies and
+      pushes it to its socket's bottom with a grasp tilted at most 45 degrees (`envs.arm_reach`); a set with a peg
+      that has none is drawn again, and the first peg's `info["feasibility"]` records the checks);
       the panel within 1 cm / 2 cm / 5 deg of its place on the deck
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
@@ -163,8 +188,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         self._load_domain_scene()
         seeds = self._asset_seeds()
         if self.asset_source == "procedural":
-            arm_base = self.mount.frames["arm_mount"][:3, 3]
-            sets = [reachable_solar_set(seed, self.clearance, arm_base) for seed in seeds]
+            sets = [reachable_solar_set(seed, self.clearance, self.mount, self.agent.urdf_path) for seed in seeds]
             layouts, pegs = [layout for layout, _ in sets], [set_pegs for _, set_pegs in sets]
         else:
             long, short = load_dataset_object("profile_peg_long"), load_dataset_object("profile_peg_short")
@@ -203,10 +227,10 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         self.panel_target = as_tensor([target] * self.num_envs)
         self._peg_placements = [peg_placement([p[i] for p in pegs], device) for i in sockets]
         if self.asset_source == "procedural":
-            arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=device)
             for i, placement in enumerate(self._peg_placements):
-                insertion = self.insertion
-                placement.allow_only(insertable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
+                faces = placement.allowed.shape[1]
+                insertable = [p[i].info["insertable_faces"] + [False] * (faces - len(p[i].info["insertable_faces"])) for p in pegs]
+                placement.allow_only(torch.tensor(insertable, dtype=torch.bool, device=device))
         self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
         # the sockets each peg may fill: those of its length
         self._fits = self._socket_class[:, None] == self._socket_class[None, :]

@@ -1,0 +1,178 @@
+"""Whether the arm can insert a lying peg: a solvability check with the agent's own kinematic model.
+
+``faces_the_arm_inserts`` plans with mplib, as the oracles do: the agent's description, the mount's surface and the ground as
+obstacle points, IK from fixed starts (deterministic) and mplib's screw motion. A resting face passes where some grasp
+from above, tilted toward the peg's tip by at most ``CHECK_TILTS``' largest angle, can be reached at the lying peg and
+holds the peg over its socket, from where a straight push takes it to the bottom. Steeper grasps are left out on
+purpose: traced on Solar Panel Assembly's tuning seeds (see the README), the sets whose long pegs lay on faces that
+only a 60-degree grasp inserts failed in every domain.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
+
+from mani_skill_space.envs.insertion import _top_grasp as top_grasp_rotation
+from mani_skill_space.procgen.asset import Asset
+from mani_skill_space.procgen.cache import ArrayCache, content_key
+
+CHECK_TILTS = np.radians([45.0, 30.0, 15.0, 0.0])
+"""The grasp tilts toward the peg's tip that the check tries (the oracles' own, less their steepest, 60 degrees)."""
+GRIP_FROM_TIP = 0.022
+"""m: the fingers take the peg at least this far from its tip (its socket's depth more), and at its middle if that
+is farther: the oracles' grasp (finger pads clear of the socket)."""
+HEAD_MARGIN = 0.005
+APPROACH_HEIGHT = 0.1
+"""m: the push starts with the tip this far above the socket's entrance (the oracles' approach)."""
+ROUND_PEG_TWISTS = 8
+IK_START_COUNT = 8
+SCREW_STEP = 0.1
+MOVE_GROUP = "panda_hand_tcp"
+CHECK_VERSION = "arm-reach-1"
+"""Part of the cache key: change it when the check's planning changes."""
+
+
+def faces_the_arm_inserts(
+    peg: Asset, faces: np.ndarray, rest_xy, hole_bottom: np.ndarray, depth: float, urdf_path: str, mount: Asset
+) -> np.ndarray:
+    """(F,) bool: which of the peg's resting ``faces`` (F, 3, 3: peg to world, lying on each) let the arm insert it
+    (see the module), the peg lying at ``rest_xy`` (world) with its tip toward the arm, its socket's bottom frame
+    ``hole_bottom`` (world, 4 x 4, z out of the socket) ``depth`` deep, for the arm described by ``urdf_path`` on
+    ``mount`` (at its ``arm_mount`` frame). The verdicts are cached on disk (``procgen.cache``): planning takes
+    tens of milliseconds a face."""
+    obstacles = _obstacle_points(mount)
+    inputs = [np.asarray(a, dtype=np.float64) for a in (peg.collision_vertices, peg.frames["end_0"], faces, rest_xy, hole_bottom, [depth, peg.info["height"], peg.info["symmetry_order"]])]
+    key = content_key(CHECK_VERSION, Path(urdf_path).read_bytes(), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
+
+    def build() -> dict[str, np.ndarray]:
+        planner = _planner_for(urdf_path, obstacles.tobytes())
+        to_base = np.linalg.inv(mount.frames["arm_mount"])
+        order = int(peg.info["symmetry_order"])
+        count = ROUND_PEG_TWISTS if order == 0 else order
+        twists = 2 * np.pi * np.arange(count) / count
+        verdicts = [_face_inserts(planner, to_base, peg, rest, rest_xy, hole_bottom, depth, twists) for rest in faces]
+        return {"inserts": np.array(verdicts, dtype=bool)}
+
+    return ArrayCache("arm_reach").get_or_create(key, build)["inserts"]
+
+
+def _face_inserts(planner, to_base, peg: Asset, rest: np.ndarray, rest_xy, hole_bottom, depth: float, twists: np.ndarray) -> bool:
+    tip = _lying_tip(peg, rest, rest_xy)
+    height = float(peg.info["height"])
+    reach = min(max(depth + GRIP_FROM_TIP, height / 2), height - HEAD_MARGIN)
+    for tilt in CHECK_TILTS:
+        for wrist in (0.0, np.pi):
+            grasp = _top_grasp(tip, tilt, reach) @ _turn_z(wrist)
+            if _ik(planner, to_base @ grasp) is None:
+                continue
+            hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
+            for twist in twists:
+                turned = hole_bottom @ _turn_z(twist)
+                over = _ik(planner, to_base @ turned @ _raised(depth + APPROACH_HEIGHT) @ hand_from_tip)
+                if over is not None and _screw_reaches(planner, over, to_base @ turned @ hand_from_tip):
+                    return True
+    return False
+
+
+def _lying_tip(peg: Asset, rest: np.ndarray, rest_xy) -> np.ndarray:
+    """The insertable end's world frame with the peg lying on ``rest`` at ``rest_xy``, its axis (tip to head) turned
+    to point away from the arm (+x), its lowest point on the ground."""
+    tip_in_peg = peg.frames["end_0"]
+    axis = rest @ tip_in_peg[:3, 2]
+    lying = _turn_z(-np.arctan2(axis[1], axis[0]))[:3, :3] @ rest
+    tip = np.eye(4)
+    tip[:3, :3] = lying @ tip_in_peg[:3, :3]
+    tip[:3, 3] = lying @ tip_in_peg[:3, 3] + [rest_xy[0], rest_xy[1], -(peg.collision_vertices @ lying.T)[:, 2].min()]
+    return tip
+
+
+def _top_grasp(tip: np.ndarray, tilt: float, reach: float) -> np.ndarray:
+    """The hand (x, closing, approach columns) taking the lying peg from above, tilted by ``tilt`` toward its tip,
+    ``reach`` from the tip along its axis (``envs.insertion``'s grasp, as the oracles take it unrolled)."""
+    hand = np.eye(4)
+    hand[:3, :3] = top_grasp_rotation(torch.as_tensor(tip[:3, 2], dtype=torch.float64), float(tilt)).numpy()
+    hand[:3, 3] = tip[:3, 3] + reach * tip[:3, 2]
+    return hand
+
+
+def _turn_z(angle: float) -> np.ndarray:
+    turn = np.eye(4)
+    turn[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    return turn
+
+
+def _raised(height: float) -> np.ndarray:
+    raised = np.eye(4)
+    raised[2, 3] = height
+    return raised
+
+
+def _pose_vector(pose: np.ndarray) -> np.ndarray:
+    p = sapien.Pose(pose)
+    return np.concatenate([p.p, p.q])
+
+
+def _ik(planner, pose_in_base: np.ndarray):
+    """A collision-free IK solution (arm joints) for the TCP at ``pose_in_base``, from fixed starts; None if none."""
+    goal = _pose_vector(pose_in_base)
+    for start in _ik_starts(planner):
+        status, found = planner.IK(goal, planner.pad_qpos(start.copy()), n_init_qpos=1)
+        if status == "Success":
+            return found[0]
+    return None
+
+
+def _screw_reaches(planner, qpos: np.ndarray, pose_in_base: np.ndarray) -> bool:
+    try:
+        result = planner.plan_screw(_pose_vector(pose_in_base), qpos.copy(), qpos_step=SCREW_STEP, time_step=0.05, use_point_cloud=True)
+    except RuntimeError:  # mplib cannot time a path of (almost) zero length: already there
+        return True
+    return result["status"] == "Success"
+
+
+def _ik_starts(planner) -> np.ndarray:
+    """The arm's rest pose, then fixed pseudo-random starts within the joint limits (the same in every process)."""
+    limits = np.asarray(planner.joint_limits)[:7]
+    rest = np.array([0.0, np.pi / 8, 0.0, -5 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4])
+    return np.concatenate([rest[None], np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(IK_START_COUNT, 7))])
+
+
+@functools.lru_cache(maxsize=4)
+def _planner_for(urdf_path: str, obstacle_points: bytes):
+    """mplib's planner for the arm in its base frame, with ``obstacle_points`` (base frame)."""
+    import mplib
+
+    planner = mplib.Planner(urdf=urdf_path, srdf=str(Path(urdf_path).with_suffix(".srdf")), move_group=MOVE_GROUP)
+    planner.update_point_cloud(np.frombuffer(obstacle_points).reshape(-1, 3))
+    return planner
+
+
+def _obstacle_points(mount: Asset) -> np.ndarray:
+    """The oracles' obstacle points (``Oracle.make_solver``) in the arm's base frame: the mount's surface above the
+    ground, and the ground a little below the arm's footing."""
+    shape = content_key(mount.frames["arm_mount"].tobytes(), *(np.ascontiguousarray(part.mesh.vertices).tobytes() for part in mount.collision_parts))
+    return _obstacle_points_of(shape, mount)
+
+
+_OBSTACLE_POINTS: dict[str, np.ndarray] = {}
+
+
+def _obstacle_points_of(shape: str, mount: Asset) -> np.ndarray:
+    if shape not in _OBSTACLE_POINTS:
+        from mani_skill_space.oracles.base import GROUND_MARGIN, _ground_points, surface_points
+
+        points = surface_points(mount)
+        points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()]) - mount.frames["arm_mount"][:3, 3]
+        _OBSTACLE_POINTS[shape] = np.ascontiguousarray(points, dtype=np.float64)
+    return _OBSTACLE_POINTS[shape]
+
+
+def resting_rotations(placement, env: int = 0) -> np.ndarray:
+    """(F, 3, 3): an env's resting rotations of a ``RestingPlacement`` (its real faces only)."""
+    return quaternion_to_matrix(placement.quaternions[env, : int(placement.counts[env])]).double().numpy()
