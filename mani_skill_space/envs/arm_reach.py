@@ -16,21 +16,14 @@ from pathlib import Path
 import numpy as np
 import sapien
 import torch
-from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 
+from mani_skill_space.envs.insertion import _rotation_z
 from mani_skill_space.envs.insertion import _top_grasp as top_grasp_rotation
 from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.cache import ArrayCache, content_key
 
 CHECK_TILTS = np.radians([45.0, 30.0, 15.0, 0.0])
 """The grasp tilts toward the peg's tip that the check tries (the oracles' own, less their steepest, 60 degrees)."""
-GRIP_FROM_TIP = 0.022
-"""m: the fingers take the peg at least this far from its tip (its socket's depth more), and at its middle if that
-is farther: the oracles' grasp (finger pads clear of the socket)."""
-HEAD_MARGIN = 0.005
-APPROACH_HEIGHT = 0.1
-"""m: the push starts with the tip this far above the socket's entrance (the oracles' approach)."""
-ROUND_PEG_TWISTS = 8
 IK_START_COUNT = 8
 SCREW_STEP = 0.1
 MOVE_GROUP = "panda_hand_tcp"
@@ -51,11 +44,11 @@ def faces_the_arm_inserts(
     key = content_key(CHECK_VERSION, Path(urdf_path).read_bytes(), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
 
     def build() -> dict[str, np.ndarray]:
+        from mani_skill_space.oracles.insertion import _twists
+
         planner = _planner_for(urdf_path, obstacles.tobytes())
         to_base = np.linalg.inv(mount.frames["arm_mount"])
-        order = int(peg.info["symmetry_order"])
-        count = ROUND_PEG_TWISTS if order == 0 else order
-        twists = 2 * np.pi * np.arange(count) / count
+        twists = _twists(int(peg.info["symmetry_order"]))
         verdicts = [_face_inserts(planner, to_base, peg, rest, rest_xy, hole_bottom, depth, twists) for rest in faces]
         return {"inserts": np.array(verdicts, dtype=bool)}
 
@@ -63,19 +56,22 @@ def faces_the_arm_inserts(
 
 
 def _face_inserts(planner, to_base, peg: Asset, rest: np.ndarray, rest_xy, hole_bottom, depth: float, twists: np.ndarray) -> bool:
+    """The oracles' grasp (``oracles.insertion``: finger pads clear of the socket, at the peg's middle if that is
+    farther from the tip, clear of its head) and approach (the tip ``APPROACH_GAP`` over the socket's entrance)."""
+    from mani_skill_space.oracles.insertion import APPROACH_GAP, FINGER_MARGIN, HEAD_OVERHANG, PAD_REACH, _along_axis
+
     tip = _lying_tip(peg, rest, rest_xy)
     height = float(peg.info["height"])
-    reach = min(max(depth + GRIP_FROM_TIP, height / 2), height - HEAD_MARGIN)
+    reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
     for tilt in CHECK_TILTS:
         for wrist in (0.0, np.pi):
-            grasp = _top_grasp(tip, tilt, reach) @ _turn_z(wrist)
+            grasp = _along_axis(_top_grasp(tip, tilt, reach), wrist, 0.0)
             if _ik(planner, to_base @ grasp) is None:
                 continue
             hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
             for twist in twists:
-                turned = hole_bottom @ _turn_z(twist)
-                over = _ik(planner, to_base @ turned @ _raised(depth + APPROACH_HEIGHT) @ hand_from_tip)
-                if over is not None and _screw_reaches(planner, over, to_base @ turned @ hand_from_tip):
+                over = _ik(planner, to_base @ _along_axis(hole_bottom, twist, depth + APPROACH_GAP) @ hand_from_tip)
+                if over is not None and _screw_reaches(planner, over, to_base @ _along_axis(hole_bottom, twist, 0.0) @ hand_from_tip):
                     return True
     return False
 
@@ -85,7 +81,7 @@ def _lying_tip(peg: Asset, rest: np.ndarray, rest_xy) -> np.ndarray:
     to point away from the arm (+x), its lowest point on the ground."""
     tip_in_peg = peg.frames["end_0"]
     axis = rest @ tip_in_peg[:3, 2]
-    lying = _turn_z(-np.arctan2(axis[1], axis[0]))[:3, :3] @ rest
+    lying = _rotation_z(torch.tensor(-np.arctan2(axis[1], axis[0]), dtype=torch.float64)).numpy() @ rest
     tip = np.eye(4)
     tip[:3, :3] = lying @ tip_in_peg[:3, :3]
     tip[:3, 3] = lying @ tip_in_peg[:3, 3] + [rest_xy[0], rest_xy[1], -(peg.collision_vertices @ lying.T)[:, 2].min()]
@@ -99,18 +95,6 @@ def _top_grasp(tip: np.ndarray, tilt: float, reach: float) -> np.ndarray:
     hand[:3, :3] = top_grasp_rotation(torch.as_tensor(tip[:3, 2], dtype=torch.float64), float(tilt)).numpy()
     hand[:3, 3] = tip[:3, 3] + reach * tip[:3, 2]
     return hand
-
-
-def _turn_z(angle: float) -> np.ndarray:
-    turn = np.eye(4)
-    turn[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-    return turn
-
-
-def _raised(height: float) -> np.ndarray:
-    raised = np.eye(4)
-    raised[2, 3] = height
-    return raised
 
 
 def _pose_vector(pose: np.ndarray) -> np.ndarray:
@@ -137,10 +121,11 @@ def _screw_reaches(planner, qpos: np.ndarray, pose_in_base: np.ndarray) -> bool:
 
 
 def _ik_starts(planner) -> np.ndarray:
-    """The arm's rest pose, then fixed pseudo-random starts within the joint limits (the same in every process)."""
-    limits = np.asarray(planner.joint_limits)[:7]
+    """The arm's rest pose, then the oracles' fixed pseudo-random starts (the same in every process)."""
+    from mani_skill_space.oracles.base import _ik_starts as random_starts
+
     rest = np.array([0.0, np.pi / 8, 0.0, -5 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4])
-    return np.concatenate([rest[None], np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(IK_START_COUNT, 7))])
+    return np.concatenate([rest[None], random_starts(planner, 7, IK_START_COUNT)])
 
 
 @functools.lru_cache(maxsize=4)
@@ -171,8 +156,3 @@ def _obstacle_points_of(shape: str, mount: Asset) -> np.ndarray:
         points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()]) - mount.frames["arm_mount"][:3, 3]
         _OBSTACLE_POINTS[shape] = np.ascontiguousarray(points, dtype=np.float64)
     return _OBSTACLE_POINTS[shape]
-
-
-def resting_rotations(placement, env: int = 0) -> np.ndarray:
-    """(F, 3, 3): an env's resting rotations of a ``RestingPlacement`` (its real faces only)."""
-    return quaternion_to_matrix(placement.quaternions[env, : int(placement.counts[env])]).double().numpy()

@@ -649,6 +649,10 @@ class RestingPlacement:
             raise ValueError("every env needs at least one allowed resting face")
         self.allowed = allowed
 
+    def rotations(self, env: int = 0) -> torch.Tensor:
+        """(F, 3, 3): one env's resting rotations (object to world, lying on each of its real faces)."""
+        return quaternion_to_matrix(self.quaternions[env, : int(self.counts[env])])
+
     def face_down(self, env_idx: torch.Tensor, uniform) -> torch.Tensor:
         """wxyz orientations (b, 4) putting a stable (allowed) face down, picked by ``uniform`` draws in [0, 1)."""
         allowed = self.allowed[env_idx]

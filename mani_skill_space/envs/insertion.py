@@ -26,7 +26,7 @@ CPU and GPU simulators alike; no body or joint is added.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -274,12 +274,13 @@ def insertable_faces(placement: RestingPlacement, tip_frames: torch.Tensor, hole
     return reachable_faces(placement, tip_frames, hole_bottoms, symmetry_orders, arm_base) & grippable_faces(placement)
 
 
-def face_checks_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray) -> dict[str, torch.Tensor]:
+def face_checks_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray, placement: Optional[RestingPlacement] = None) -> dict[str, torch.Tensor]:
     """Each solvability check's verdict (faces,) on every resting face of one peg asset, for its hole's
     ``hole_bottom`` (world, 4 x 4) and an arm at ``arm_base``, on the CPU: ``reachable`` (``reachable_faces``),
-    ``grippable`` (``grippable_faces``) and ``insertable`` (both)."""
+    ``grippable`` (``grippable_faces``) and ``insertable`` (both). ``placement``: the peg's own
+    ``peg_placement([peg], "cpu")``, where the caller has it already."""
     as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)  # noqa: E731
-    placement = peg_placement([peg], "cpu")
+    placement = peg_placement([peg], "cpu") if placement is None else placement
     reachable = reachable_faces(
         placement, as_tensor(peg.frames["end_0"])[None], as_tensor(hole_bottom)[None], torch.tensor([peg.info["symmetry_order"]]), as_tensor(arm_base)
     )[0]

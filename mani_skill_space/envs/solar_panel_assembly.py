@@ -7,27 +7,27 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.arm_reach import faces_the_arm_inserts, resting_rotations
+from mani_skill_space.envs.arm_reach import faces_the_arm_inserts
 from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
     PEG_DROP_CLEARANCE,
     PegInsertion,
+    face_checks_of,
+    feasibility_record,
+    hole_in_peg_end,
     insertion_inputs,
     insertion_terms,
     latch_force,
     lying_peg_orientation,
     peg_placement,
     pegs_latched_in_holes,
-    face_checks_of,
-    feasibility_record,
-    hole_in_peg_end,
     redrawn_seed,
     seated_pairs,
 )
-from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.geometry import pose_error, pose_matrix, relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.mounts import DECK_HEIGHT, make_rover, make_station
 from mani_skill_space.procgen.solar_panel import (
     LONG_SOCKETS,
@@ -110,10 +110,11 @@ def solar_face_checks(layout, pegs: list[Asset], mount: Asset, urdf_path: str) -
     checks = []
     for i, peg in enumerate(pegs):
         bottom = origin @ frames[f"bottom_{i}"]
-        c = face_checks_of(peg, bottom, arm_base)
+        placement = peg_placement([peg], "cpu")
+        c = face_checks_of(peg, bottom, arm_base, placement)
         candidates = c["insertable"].numpy()
         arm = np.zeros_like(candidates)
-        faces = resting_rotations(peg_placement([peg], "cpu"))
+        faces = placement.rotations().double().numpy()
         arm[candidates] = faces_the_arm_inserts(peg, faces[candidates], PEG_REST_XY[i], bottom, layout.depth, urdf_path, mount)
         c["arm_inserts"] = torch.as_tensor(arm)
         c["insertable"] = c["insertable"] & c["arm_inserts"]

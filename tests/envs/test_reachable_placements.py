@@ -149,7 +149,7 @@ def test_the_arm_check_rejects_a_face_only_a_steep_grasp_inserts():
     pass the other checks are inserted with 45 degrees."""
     from mani_skill.agents.robots.panda.panda import Panda
 
-    from mani_skill_space.envs.arm_reach import faces_the_arm_inserts, resting_rotations
+    from mani_skill_space.envs.arm_reach import faces_the_arm_inserts
     from mani_skill_space.envs.solar_panel_assembly import PANEL_TARGET_XY, PEG_REST_XY
     from mani_skill_space.procgen.solar_panel import make_solar_layout, make_solar_pegs, socket_frames
 
@@ -157,7 +157,7 @@ def test_the_arm_check_rejects_a_face_only_a_steep_grasp_inserts():
     peg = make_solar_pegs(layout, 64001)[0]
     bottom = socket_frames(layout)["bottom_0"]
     bottom[:2, 3] += PANEL_TARGET_XY
-    faces = resting_rotations(peg_placement([peg], "cpu"))[[2, 3, 4, 5, 6]]
+    faces = peg_placement([peg], "cpu").rotations().double().numpy()[[2, 3, 4, 5, 6]]
     verdicts = faces_the_arm_inserts(peg, faces, PEG_REST_XY[0], bottom, layout.depth, Panda.urdf_path, make_rover(cargo_bin=False))
     assert verdicts.tolist() == [True, True, True, False, True]
 
