@@ -29,6 +29,7 @@ from mani_skill_space.cli_support import check_at_least, checking_inputs, run_cl
 from mani_skill_space.dataset import load_dataset_object
 from mani_skill_space.domains import DOMAINS
 from mani_skill_space.envs import task_class
+from mani_skill_space.envs.multi_peg_in_hole_assembly import module_positions, pair_arm_planning
 from mani_skill_space.envs.peg_in_hole_assembly import reachable_peg_hole_pair
 from mani_skill_space.envs.solar_panel_assembly import reachable_solar_set
 from mani_skill_space.procgen.debris import make_debris
@@ -180,6 +181,7 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     arm_base = make_rover().frames["arm_mount"][:3, 3]
     generators["peg and hole pair (as the env draws it: solvability checks, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
+    generators["peg and hole pair at Multi-Peg-in-Hole's outer module (checks with the arm's planning, redraws; cached on disk)"] = _multi_peg_pair
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
     solar_mount = make_rover(cargo_bin=False)
@@ -188,6 +190,14 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")
     return generators
+
+
+def _multi_peg_pair(seed: int) -> tuple:
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    mount = make_rover(cargo_bin=False)
+    positions = module_positions("procedural")
+    return reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, mount.frames["arm_mount"][:3, 3], positions[0], pair_arm_planning(mount, Panda.urdf_path, positions, 0))
 
 
 def _solar_panel_set(seed: int) -> tuple:

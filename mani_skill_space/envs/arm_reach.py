@@ -1,9 +1,10 @@
 """Whether the arm can insert a lying peg: a solvability check with the agent's own kinematic model.
 
-``faces_the_arm_inserts`` plans with mplib, as the oracles do: the agent's description, the mount's surface and the ground as
-obstacle points, IK from fixed starts (deterministic) and mplib's screw motion. A resting face passes where some grasp
-from above, tilted toward the peg's tip by at most ``CHECK_TILTS``' largest angle, can be reached at the lying peg and
-holds the peg over its socket, from where a straight push takes it to the bottom. Steeper grasps are left out on
+``faces_the_arm_inserts`` plans with mplib, as the oracles do: the agent's description, the mount's surface and the ground
+(and any other fixed obstacles the task has, e.g. the neighbouring hole modules) as obstacle points, IK from fixed
+starts (deterministic) and mplib's screw motion at the insertion oracles' fine step. A resting face passes where some
+grasp from above, tilted toward the peg's tip by at most ``CHECK_TILTS``' largest angle, can be reached at the lying
+peg and holds the peg over its socket, from where a straight push takes it to the bottom. Steeper grasps are left out on
 purpose: traced on Solar Panel Assembly's tuning seeds (see the README), the sets whose long pegs lay on faces that
 only a 60-degree grasp inserts failed in every domain.
 """
@@ -11,7 +12,9 @@ only a 60-degree grasp inserts failed in every domain.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import sapien
@@ -19,27 +22,76 @@ import torch
 
 from mani_skill_space.envs.insertion import _rotation_z
 from mani_skill_space.envs.insertion import _top_grasp as top_grasp_rotation
+from mani_skill_space.envs.insertion import face_checks_of, peg_placement
 from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.cache import ArrayCache, content_key
 
 CHECK_TILTS = np.radians([45.0, 30.0, 15.0, 0.0])
 """The grasp tilts toward the peg's tip that the check tries (the oracles' own, less their steepest, 60 degrees)."""
 IK_START_COUNT = 8
-SCREW_STEP = 0.1
 MOVE_GROUP = "panda_hand_tcp"
-CHECK_VERSION = "arm-reach-1"
+CHECK_VERSION = "arm-reach-3"
 """Part of the cache key: change it when the check's planning changes."""
 
 
+@dataclass(frozen=True)
+class ArmPlanning:
+    """What ``face_checks_with_the_arm`` plans with, besides the peg and its hole: the arm described by ``urdf_path``
+    on ``mount``, the peg lying at ``rest_xy`` (world), and ``extra_obstacles`` (world points) besides the mount and
+    the ground."""
+
+    mount: Asset
+    urdf_path: str
+    rest_xy: tuple[float, float]
+    extra_obstacles: Optional[np.ndarray] = None
+
+
+def module_obstacles(hole: Asset, module: np.ndarray, peg_radius: float) -> np.ndarray:
+    """Obstacle points (world) on a hole module at ``module`` (4 x 4), as the insertion oracles see it while they push
+    the peg in: all but the keep-out round the hole's axis near its entrance (``oracles.insertion.outside_keepout``)."""
+    from mani_skill_space.oracles.base import surface_points
+    from mani_skill_space.oracles.insertion import outside_hole_keepout
+
+    return outside_hole_keepout(surface_points(hole, module), module @ hole.frames["bottom"], float(hole.info["depth"]), peg_radius)
+
+
+def face_checks_with_the_arm(
+    peg: Asset, hole_bottom: np.ndarray, depth: float, rest_xy, mount: Asset, urdf_path: str, extra_obstacles: Optional[np.ndarray] = None
+) -> dict[str, torch.Tensor]:
+    """Each solvability check's verdict (faces,) on every resting face of one peg: ``envs.insertion.face_checks_of``
+    (``reachable``, ``grippable``) for an arm at ``mount``'s ``arm_mount``, and ``arm_inserts``
+    (``faces_the_arm_inserts``, the same arguments, planned only for the faces that pass the others); ``insertable``:
+    all of them."""
+    placement = peg_placement([peg], "cpu")
+    checks = face_checks_of(peg, hole_bottom, mount.frames["arm_mount"][:3, 3], placement)
+    candidates = checks["insertable"].numpy()
+    arm = np.zeros_like(candidates)
+    if candidates.any():
+        faces = placement.rotations().double().numpy()[candidates]
+        arm[candidates] = faces_the_arm_inserts(peg, faces, rest_xy, hole_bottom, depth, urdf_path, mount, extra_obstacles)
+    checks["arm_inserts"] = torch.as_tensor(arm)
+    checks["insertable"] = checks["insertable"] & checks["arm_inserts"]
+    return checks
+
+
 def faces_the_arm_inserts(
-    peg: Asset, faces: np.ndarray, rest_xy, hole_bottom: np.ndarray, depth: float, urdf_path: str, mount: Asset
+    peg: Asset,
+    faces: np.ndarray,
+    rest_xy,
+    hole_bottom: np.ndarray,
+    depth: float,
+    urdf_path: str,
+    mount: Asset,
+    extra_obstacles: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """(F,) bool: which of the peg's resting ``faces`` (F, 3, 3: peg to world, lying on each) let the arm insert it
     (see the module), the peg lying at ``rest_xy`` (world) with its tip toward the arm, its socket's bottom frame
     ``hole_bottom`` (world, 4 x 4, z out of the socket) ``depth`` deep, for the arm described by ``urdf_path`` on
-    ``mount`` (at its ``arm_mount`` frame). The verdicts are cached on disk (``procgen.cache``): planning takes
-    tens of milliseconds a face."""
+    ``mount`` (at its ``arm_mount`` frame), with ``extra_obstacles`` (world points) besides the mount and the
+    ground. The verdicts are cached on disk (``procgen.cache``): planning takes tens of milliseconds a face."""
     obstacles = _obstacle_points(mount)
+    if extra_obstacles is not None:
+        obstacles = np.ascontiguousarray(np.concatenate([obstacles, np.asarray(extra_obstacles, dtype=np.float64) - mount.frames["arm_mount"][:3, 3]]))
     inputs = [np.asarray(a, dtype=np.float64) for a in (peg.collision_vertices, peg.frames["end_0"], faces, rest_xy, hole_bottom, [depth, peg.info["height"], peg.info["symmetry_order"]])]
     key = content_key(CHECK_VERSION, Path(urdf_path).read_bytes(), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
 
@@ -70,9 +122,10 @@ def _face_inserts(planner, to_base, peg: Asset, rest: np.ndarray, rest_xy, hole_
                 continue
             hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
             for twist in twists:
-                over = _ik(planner, to_base @ _along_axis(hole_bottom, twist, depth + APPROACH_GAP) @ hand_from_tip)
-                if over is not None and _screw_reaches(planner, over, to_base @ _along_axis(hole_bottom, twist, 0.0) @ hand_from_tip):
-                    return True
+                pressed = to_base @ _along_axis(hole_bottom, twist, 0.0) @ hand_from_tip
+                for over in _ik_solutions(planner, to_base @ _along_axis(hole_bottom, twist, depth + APPROACH_GAP) @ hand_from_tip):
+                    if _screw_reaches(planner, over, pressed):
+                        return True
     return False
 
 
@@ -104,17 +157,26 @@ def _pose_vector(pose: np.ndarray) -> np.ndarray:
 
 def _ik(planner, pose_in_base: np.ndarray):
     """A collision-free IK solution (arm joints) for the TCP at ``pose_in_base``, from fixed starts; None if none."""
+    return next(_ik_solutions(planner, pose_in_base), None)
+
+
+def _ik_solutions(planner, pose_in_base: np.ndarray):
+    """Collision-free IK solutions for the TCP at ``pose_in_base``, one per fixed start that finds one, lazily."""
     goal = _pose_vector(pose_in_base)
     for start in _ik_starts(planner):
         status, found = planner.IK(goal, planner.pad_qpos(start.copy()), n_init_qpos=1)
         if status == "Success":
-            return found[0]
-    return None
+            yield found[0]
 
 
 def _screw_reaches(planner, qpos: np.ndarray, pose_in_base: np.ndarray) -> bool:
+    """Whether mplib's screw motion, at the insertion oracles' joint step (``oracles.base.FINE_SCREW_STEP``: at a
+    coarser step it drifts off the straight line and can step over a thin shell of obstacle points), takes the TCP
+    from ``qpos`` to ``pose_in_base`` without touching the obstacles."""
+    from mani_skill_space.oracles.base import FINE_SCREW_STEP
+
     try:
-        result = planner.plan_screw(_pose_vector(pose_in_base), qpos.copy(), qpos_step=SCREW_STEP, time_step=0.05, use_point_cloud=True)
+        result = planner.plan_screw(_pose_vector(pose_in_base), qpos.copy(), qpos_step=FINE_SCREW_STEP, time_step=0.05, use_point_cloud=True)
     except RuntimeError:  # mplib cannot time a path of (almost) zero length: already there
         return True
     return result["status"] == "Success"
@@ -128,13 +190,16 @@ def _ik_starts(planner) -> np.ndarray:
     return np.concatenate([rest[None], random_starts(planner, 7, IK_START_COUNT)])
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=8)
 def _planner_for(urdf_path: str, obstacle_points: bytes):
     """mplib's planner for the arm in its base frame, with ``obstacle_points`` (base frame)."""
     import mplib
 
     planner = mplib.Planner(urdf=urdf_path, srdf=str(Path(urdf_path).with_suffix(".srdf")), move_group=MOVE_GROUP)
     planner.update_point_cloud(np.frombuffer(obstacle_points).reshape(-1, 3))
+    # IK checks the points only once this is set, and plan_screw sets it: set from the start, so that every IK
+    # solution is collision-free (as the oracles' are) and no verdict depends on what the planner did before
+    planner.planning_world.set_use_point_cloud(True)
     return planner
 
 

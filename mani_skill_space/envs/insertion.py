@@ -274,6 +274,14 @@ def insertable_faces(placement: RestingPlacement, tip_frames: torch.Tensor, hole
     return reachable_faces(placement, tip_frames, hole_bottoms, symmetry_orders, arm_base) & grippable_faces(placement)
 
 
+def allow_insertable_faces(placement: RestingPlacement, pegs: Sequence[Asset]) -> None:
+    """Let ``placement`` (one peg per env, ``pegs``) put down only the faces each peg's ``info["insertable_faces"]``
+    lists (those that passed its solvability checks when it was drawn)."""
+    faces = placement.allowed.shape[1]
+    listed = [list(p.info["insertable_faces"]) + [False] * (faces - len(p.info["insertable_faces"])) for p in pegs]
+    placement.allow_only(torch.tensor(listed, dtype=torch.bool, device=placement.allowed.device))
+
+
 def face_checks_of(peg: Asset, hole_bottom: np.ndarray, arm_base: np.ndarray, placement: Optional[RestingPlacement] = None) -> dict[str, torch.Tensor]:
     """Each solvability check's verdict (faces,) on every resting face of one peg asset, for its hole's
     ``hole_bottom`` (world, 4 x 4) and an arm at ``arm_base``, on the CPU: ``reachable`` (``reachable_faces``),

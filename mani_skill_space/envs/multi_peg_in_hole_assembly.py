@@ -1,4 +1,6 @@
 
+import functools
+
 import numpy as np
 import sapien
 import torch
@@ -6,23 +8,26 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.envs.arm_reach import ArmPlanning
 from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
     PEG_DROP_CLEARANCE,
     PegInsertion,
+    allow_insertable_faces,
     insertion_inputs,
     insertion_terms,
     lying_peg_orientation,
     peg_placement,
     pegs_latched_in_holes,
-    insertable_faces,
     seated_pairs,
 )
 from mani_skill_space.envs.peg_in_hole_assembly import PEG_DISTANCE, module_position, reachable_peg_hole_pair
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
+from mani_skill_space.procgen.asset import Asset, CollisionPart
 from mani_skill_space.procgen.mounts import make_rover, make_station
+from mani_skill_space.procgen.peg_hole import module_block
 from mani_skill_space.rewards import RewardTable, RewardTerm
 
 PAIR_COUNT = 4
@@ -49,6 +54,31 @@ def module_positions(asset_source: str) -> np.ndarray:
     return np.array([[x, y, z] for y in MODULE_YS])
 
 
+def pair_arm_planning(mount: Asset, urdf_path: str, positions: np.ndarray, index: int) -> ArmPlanning:
+    """The arm's own check of the pair at module ``index`` (``envs.arm_reach``): its peg lying in its lane, in the
+    middle of the range in front of the modules, with the other modules' blocks as obstacles besides the mount. A
+    hand holding a peg over a tilted hole reaches sideways over the module beside it (modules 2 cm apart, the hand
+    20 cm wide): traced on seed 62008, the oracle found no push into the outer hole that missed the next module's top."""
+    x = float(positions[index][0]) - float(np.mean(PEG_DISTANCE))
+    return ArmPlanning(mount, urdf_path, (x, PEG_LANE_YS[index]), _module_block_points(tuple(map(tuple, positions)), index))
+
+
+@functools.lru_cache(maxsize=8)
+def _module_block_points(positions: tuple, index: int) -> np.ndarray:
+    """Obstacle points (world) on the blocks of every module but ``index`` (every block is the same box; the holes
+    cut into them do not matter here)."""
+    from mani_skill_space.oracles.base import surface_points
+
+    block = Asset(name="module_block", visual_parts=(), collision_parts=(CollisionPart(module_block()),))
+    points = []
+    for i, position in enumerate(positions):
+        if i != index:
+            pose = np.eye(4)
+            pose[:3, 3] = position
+            points.append(surface_points(block, pose))
+    return np.concatenate(points)
+
+
 @register_env("MultiPegInHoleAssembly-v1", max_episode_steps=800)
 class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     """
@@ -63,11 +93,14 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       env): `asset_source="dataset"` gives the 20 x 20 mm square profile peg, 100 or 200 mm long (drawn per peg),
       and the 22 x 22 mm socket on a 50 x 50 mm post; `asset_source="procedural"` gives Peg-in-Hole's procedural
       pairs (random profile, size, taper; hole at a random offset, tilt up to 20 deg and depth, `clearance`
-      default 1 mm), each drawn again until the arm can insert it at its module (`reachable_peg_hole_pair`)
+      default 1 mm), each drawn again until the arm can insert it at its module (`reachable_peg_hole_pair`, with
+      the arm's own planning, `pair_arm_planning`: the push into the hole must miss the modules)
     - the modules stand at x = 0.6 m (procedural; the dataset posts at 0.7 m, as in Peg-in-Hole), y = +-0.085 and
       +-0.255 m; each peg lies on a random stable side 0.24-0.28 m in front of its module, within +-2 cm of its
       centre line, its tip toward the arm within +-11 deg (for procedural pairs, only on a side from which the arm
-      can take it and hold it over its hole, and from which the fingers can hold it: `envs.insertion.face_checks_of`)
+      can take it and hold it over its hole, from which the fingers can hold it, `envs.insertion.face_checks_of`,
+      and from which the arm's own planning pushes it to its hole's bottom without touching a module,
+      `envs.arm_reach`; each peg's `info["insertable_faces"]`)
     - the terrain (or nothing, in orbit) and the sun direction (during reconfiguration); the arm's initial joints
 
     **Success Conditions:**
@@ -98,10 +131,11 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         arm_base = self.mount.frames["arm_mount"][:3, 3]
         positions = module_positions(self.asset_source)
         pegs, holes = [], []  # [pair][env]
-        for position in positions:
+        for i, position in enumerate(positions):
             seeds = self._asset_seeds()
             if self.asset_source == "procedural":
-                pairs = [reachable_peg_hole_pair(seed, self.clearance, arm_base, position) for seed in seeds]
+                arm = pair_arm_planning(self.mount, self.agent.urdf_path, positions, i)
+                pairs = [reachable_peg_hole_pair(seed, self.clearance, arm_base, position, arm) for seed in seeds]
                 pegs.append([peg for peg, _ in pairs])
                 holes.append([hole for _, hole in pairs])
             else:
@@ -136,10 +170,8 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         )
         self._peg_placements = [peg_placement(pegs[i], device) for i in pairs]
         if self.asset_source == "procedural":
-            arm_base = torch.as_tensor(self.mount.frames["arm_mount"][:3, 3], dtype=torch.float32, device=device)
-            insertion = self.insertion
             for i, placement in enumerate(self._peg_placements):
-                placement.allow_only(insertable_faces(placement, insertion.peg_ends[:, i, 0], insertion.hole_bottom[:, i], insertion.symmetry_order[:, i], arm_base))
+                allow_insertable_faces(placement, pegs[i])
         # (peg, hole) pairs that fit: every socket takes every dataset peg; a procedural peg only its own hole
         same_shapes = self.asset_source == "dataset"
         self._fits = torch.ones((PAIR_COUNT, PAIR_COUNT), dtype=torch.bool, device=device) if same_shapes else torch.eye(PAIR_COUNT, dtype=torch.bool, device=device)

@@ -1,4 +1,6 @@
 
+from typing import Optional
+
 import numpy as np
 import sapien
 import torch
@@ -6,6 +8,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
+from mani_skill_space.envs.arm_reach import ArmPlanning, face_checks_with_the_arm, module_obstacles
 from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
@@ -56,19 +59,33 @@ six draws is rejected: see ``reachable_peg_hole_pair``)."""
 REWARD_TABLE = RewardTable((*insertion_terms(), *PENALTY_TERMS))
 
 
-def reachable_peg_hole_pair(seed: int, clearance: float, arm_base: np.ndarray, module_position=PROCEDURAL_MODULE_POSITION) -> tuple[Asset, Asset]:
+def reachable_peg_hole_pair(
+    seed: int, clearance: float, arm_base: np.ndarray, module_position=PROCEDURAL_MODULE_POSITION, arm: Optional[ArmPlanning] = None
+) -> tuple[Asset, Asset]:
     """The procedural pair of ``seed``, drawn again (from seeds derived from it, deterministically) while no
     resting face of its peg passes the solvability checks (``envs.insertion.face_checks_of``: reachable for
-    insertion by an arm at ``arm_base`` with the module at ``module_position``, and tall enough to grip). The hole's
+    insertion by an arm at ``arm_base`` with the module at ``module_position``, and tall enough to grip; given
+    ``arm``, also the arm's own planning, ``envs.arm_reach.face_checks_with_the_arm``, with the module itself as an
+    obstacle as the oracles see it while pushing, ``module_obstacles``). The hole's
     ``info["feasibility"]`` records the checks (``feasibility_record``): how many draws it took and how many faces
-    pass each (the episode's peg lies on one that passes all)."""
+    pass each (the episode's peg lies on one that passes all); given ``arm``, the peg's ``info["insertable_faces"]``
+    lists those faces."""
     module = np.eye(4)
     module[:3, 3] = module_position
     for draw in range(MAX_PAIR_DRAWS):
         peg, hole = make_peg_hole_pair(redrawn_seed(seed, draw), clearance)
-        checks = face_checks_of(peg, module @ hole.frames["bottom"], arm_base)
+        bottom = module @ hole.frames["bottom"]
+        if arm is None:
+            checks = face_checks_of(peg, bottom, arm_base)
+        else:
+            obstacles = module_obstacles(hole, module, float(peg.info["radius"]))
+            if arm.extra_obstacles is not None:
+                obstacles = np.concatenate([arm.extra_obstacles, obstacles])
+            checks = face_checks_with_the_arm(peg, bottom, hole.info["depth"], arm.rest_xy, arm.mount, arm.urdf_path, obstacles)
         if bool(checks["insertable"].any()):
             hole.info["feasibility"] = feasibility_record(draw + 1, [checks])
+            if arm is not None:
+                peg.info["insertable_faces"] = checks["insertable"].tolist()
             return peg, hole
     raise RuntimeError(f"no procedural peg/hole pair the arm can insert in {MAX_PAIR_DRAWS} draws from seed {seed}")
 

@@ -7,14 +7,14 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.envs.arm_reach import faces_the_arm_inserts
+from mani_skill_space.envs.arm_reach import face_checks_with_the_arm
 from mani_skill_space.envs.base import PENALTY_TERMS, SocketClearance, SpaceManipulationEnv
 from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
     PEG_DROP_CLEARANCE,
     PegInsertion,
-    face_checks_of,
+    allow_insertable_faces,
     feasibility_record,
     hole_in_peg_end,
     insertion_inputs,
@@ -99,27 +99,12 @@ def reachable_solar_set(seed: int, clearance: float, mount: Asset, urdf_path: st
 
 
 def solar_face_checks(layout, pegs: list[Asset], mount: Asset, urdf_path: str) -> list[dict[str, torch.Tensor]]:
-    """Each peg's checks per resting face: ``envs.insertion.face_checks_of`` (``reachable``, ``grippable``), and
-    ``arm_inserts`` (``envs.arm_reach.faces_the_arm_inserts``, planned only for the faces that pass the others: the
-    arm takes the peg where it lies and pushes it into its socket with a grasp tilted at most 45 degrees);
-    ``insertable``: all of them."""
+    """Each peg's checks per resting face at its socket (``envs.arm_reach.face_checks_with_the_arm``: ``reachable``,
+    ``grippable``, ``arm_inserts``, and ``insertable``: all of them)."""
     origin = np.eye(4)
     origin[:2, 3] = PANEL_TARGET_XY
     frames = socket_frames(layout)
-    arm_base = mount.frames["arm_mount"][:3, 3]
-    checks = []
-    for i, peg in enumerate(pegs):
-        bottom = origin @ frames[f"bottom_{i}"]
-        placement = peg_placement([peg], "cpu")
-        c = face_checks_of(peg, bottom, arm_base, placement)
-        candidates = c["insertable"].numpy()
-        arm = np.zeros_like(candidates)
-        faces = placement.rotations().double().numpy()
-        arm[candidates] = faces_the_arm_inserts(peg, faces[candidates], PEG_REST_XY[i], bottom, layout.depth, urdf_path, mount)
-        c["arm_inserts"] = torch.as_tensor(arm)
-        c["insertable"] = c["insertable"] & c["arm_inserts"]
-        checks.append(c)
-    return checks
+    return [face_checks_with_the_arm(peg, origin @ frames[f"bottom_{i}"], layout.depth, PEG_REST_XY[i], mount, urdf_path) for i, peg in enumerate(pegs)]
 
 
 @register_env("SolarPanelAssembly-v1", max_episode_steps=1000)
@@ -229,9 +214,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         self._peg_placements = [peg_placement([p[i] for p in pegs], device) for i in sockets]
         if self.asset_source == "procedural":
             for i, placement in enumerate(self._peg_placements):
-                faces = placement.allowed.shape[1]
-                insertable = [p[i].info["insertable_faces"] + [False] * (faces - len(p[i].info["insertable_faces"])) for p in pegs]
-                placement.allow_only(torch.tensor(insertable, dtype=torch.bool, device=device))
+                allow_insertable_faces(placement, [p[i] for p in pegs])
         self._socket_class = torch.as_tensor([i in LONG_SOCKETS for i in range(SOCKET_COUNT)], device=device)
         # the sockets each peg may fill: those of its length
         self._fits = self._socket_class[:, None] == self._socket_class[None, :]

@@ -621,12 +621,16 @@ def other_pegs(pegs: list, peg_assets: list, held: int, standing) -> np.ndarray:
 def outside_keepout(points: np.ndarray, target: PegTarget) -> np.ndarray:
     """Obstacle points except around the hole's axis near its entrance, where the peg and the fingers holding
     it go in (deeper down, e.g. a post's sides, they stay: the hand must not run into them on its way)."""
-    bottom = target.bottom
+    return outside_hole_keepout(points, target.bottom, target.depth, target.radius)
+
+
+def outside_hole_keepout(points: np.ndarray, bottom: np.ndarray, depth: float, peg_radius: float) -> np.ndarray:
+    """``outside_keepout`` for a hole with its ``bottom`` frame (world, 4 x 4), ``depth`` and its peg's radius."""
     offset = points - bottom[:3, 3]
     along = offset @ bottom[:3, 2]
     lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
-    near_entrance = along > target.depth - KEEPOUT_BELOW_ENTRANCE
-    return points[(lateral > target.radius + AXIS_KEEPOUT) | ~near_entrance]
+    near_entrance = along > depth - KEEPOUT_BELOW_ENTRANCE
+    return points[(lateral > peg_radius + AXIS_KEEPOUT) | ~near_entrance]
 
 
 def _turn_between(a: sapien.Pose, b: sapien.Pose) -> float:

@@ -236,6 +236,11 @@ def _section_at_top(cavity: np.ndarray) -> np.ndarray:
     return below[np.isclose(below[:, 2], MODULE_HEIGHT)][:, :2] if len(below) else below[:, :2]
 
 
+def module_block() -> trimesh.Trimesh:
+    """The hole module's block before its hole is cut (origin at the centre of its base)."""
+    return convex_mesh(_box_vertices())
+
+
 def _box_vertices() -> np.ndarray:
     a, h = MODULE_HALF_SIZE, MODULE_HEIGHT
     return np.array([[x, y, z] for x in (-a, a) for y in (-a, a) for z in (0.0, h)])

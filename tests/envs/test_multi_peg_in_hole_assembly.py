@@ -47,6 +47,10 @@ def test_four_pegs_lie_at_rest_in_front_of_four_modules(asset_source):
         depths = u.insertion.hole_depth[0]
         assert len(set(depths.tolist())) == PAIR_COUNT
         assert all("feasibility" in u.hole_assets[i][0].info for i in range(PAIR_COUNT))
+        # each peg lies on a face its arm check passed (envs.arm_reach)
+        assert all(u.hole_assets[i][0].info["feasibility"]["checks"][0] == "arm_inserts" for i in range(PAIR_COUNT))
+        assert all(bool(u._peg_placements[i].allowed[0].any()) for i in range(PAIR_COUNT))
+        assert all(u._peg_placements[i].allowed[0, : len(u.peg_assets[i][0].info["insertable_faces"])].tolist() == u.peg_assets[i][0].info["insertable_faces"] for i in range(PAIR_COUNT))
     env.close()
 
 

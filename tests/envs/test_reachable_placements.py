@@ -173,3 +173,40 @@ def test_a_peg_widest_only_at_its_base_is_not_grippable():
     assert _lying_heights(triangle).min() >= MIN_GRIP_HEIGHT  # tall enough: it is the wedge that rules it out
     assert not bool(faces[0].any())
     assert bool(faces[1, : len(_lying_heights(square))].all())
+
+
+def test_the_multi_peg_arm_check_redraws_a_pair_whose_push_meets_the_modules():
+    """Seed 62008's outer pair on the Moon (its asset seed 400468823): the sim-free checks pass both resting faces of
+    its peg, but from neither can the arm push it into the tilted hole without meeting a module's top (traced: the
+    oracle found no grasp that lines it up and pushes it in), so the pair is drawn again."""
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    from mani_skill_space.envs.multi_peg_in_hole_assembly import module_positions, pair_arm_planning
+
+    rover = make_rover(cargo_bin=False)
+    positions = module_positions("procedural")
+    arm_base = rover.frames["arm_mount"][:3, 3]
+    first_peg, unchecked = reachable_peg_hole_pair(400468823, 0.001, arm_base, positions[0])
+    assert unchecked.info["feasibility"]["draws"] == 1 and unchecked.info["feasibility"]["insertable_resting_faces"] == [2]
+    peg, hole = reachable_peg_hole_pair(400468823, 0.001, arm_base, positions[0], pair_arm_planning(rover, Panda.urdf_path, positions, 0))
+    record = hole.info["feasibility"]
+    assert record["draws"] > 1 and peg.name != first_peg.name
+    assert record["checks"] == ["arm_inserts", "grippable", "insertable", "reachable"]
+    assert sum(peg.info["insertable_faces"]) == record["insertable_resting_faces"][0] >= 1
+
+
+def test_every_multi_peg_pair_has_a_face_the_arm_inserts():
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    from mani_skill_space.envs.multi_peg_in_hole_assembly import module_positions, pair_arm_planning
+    from mani_skill_space.procgen.mounts import make_station
+
+    positions = module_positions("procedural")
+    for mount in (make_rover(cargo_bin=False), make_station()):
+        arm_base = mount.frames["arm_mount"][:3, 3]
+        for seed in range(4):
+            for i in range(4):
+                peg, hole = reachable_peg_hole_pair(seed, 0.001, arm_base, positions[i], pair_arm_planning(mount, Panda.urdf_path, positions, i))
+                record = hole.info["feasibility"]
+                assert sum(peg.info["insertable_faces"]) == record["insertable_resting_faces"][0] >= 1
+                assert record["arm_inserts_resting_faces"][0] >= record["insertable_resting_faces"][0]
