@@ -181,7 +181,8 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     arm_base = make_rover().frames["arm_mount"][:3, 3]
     generators["peg and hole pair (as the env draws it: solvability checks, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
-    generators["peg and hole pair at Multi-Peg-in-Hole's outer module (checks with the arm's planning, redraws; cached on disk)"] = _multi_peg_pair
+    multi_peg_mount = make_rover(cargo_bin=False)
+    generators["peg and hole pair at Multi-Peg-in-Hole's outer module (checks with the arm's planning, redraws; cached on disk)"] = lambda seed: _multi_peg_pair(seed, multi_peg_mount)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
     solar_mount = make_rover(cargo_bin=False)
@@ -192,10 +193,9 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     return generators
 
 
-def _multi_peg_pair(seed: int) -> tuple:
+def _multi_peg_pair(seed: int, mount) -> tuple:
     from mani_skill.agents.robots.panda.panda import Panda
 
-    mount = make_rover(cargo_bin=False)
     positions = module_positions("procedural")
     return reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, mount.frames["arm_mount"][:3, 3], positions[0], pair_arm_planning(mount, Panda.urdf_path, positions, 0))
 

@@ -93,7 +93,7 @@ def faces_the_arm_inserts(
     if extra_obstacles is not None:
         obstacles = np.ascontiguousarray(np.concatenate([obstacles, np.asarray(extra_obstacles, dtype=np.float64) - mount.frames["arm_mount"][:3, 3]]))
     inputs = [np.asarray(a, dtype=np.float64) for a in (peg.collision_vertices, peg.frames["end_0"], faces, rest_xy, hole_bottom, [depth, peg.info["height"], peg.info["symmetry_order"]])]
-    key = content_key(CHECK_VERSION, Path(urdf_path).read_bytes(), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
+    key = content_key(CHECK_VERSION, _description_key(urdf_path), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
 
     def build() -> dict[str, np.ndarray]:
         from mani_skill_space.oracles.insertion import _twists
@@ -190,6 +190,12 @@ def _ik_starts(planner) -> np.ndarray:
     return np.concatenate([rest[None], random_starts(planner, 7, IK_START_COUNT)])
 
 
+@functools.lru_cache(maxsize=4)
+def _description_key(urdf_path: str) -> str:
+    """The robot description's content hash (read once per process, not once per peg)."""
+    return content_key(Path(urdf_path).read_bytes())
+
+
 @functools.lru_cache(maxsize=8)
 def _planner_for(urdf_path: str, obstacle_points: bytes):
     """mplib's planner for the arm in its base frame, with ``obstacle_points`` (base frame)."""
@@ -204,8 +210,8 @@ def _planner_for(urdf_path: str, obstacle_points: bytes):
 
 
 def _obstacle_points(mount: Asset) -> np.ndarray:
-    """The oracles' obstacle points (``Oracle.make_solver``) in the arm's base frame: the mount's surface above the
-    ground, and the ground a little below the arm's footing."""
+    """The oracles' obstacle points of what the arm stands on (``oracles.base.standing_obstacle_points``, as
+    ``Oracle.make_solver`` takes them) in the arm's base frame."""
     shape = content_key(mount.frames["arm_mount"].tobytes(), *(np.ascontiguousarray(part.mesh.vertices).tobytes() for part in mount.collision_parts))
     return _obstacle_points_of(shape, mount)
 
@@ -215,9 +221,8 @@ _OBSTACLE_POINTS: dict[str, np.ndarray] = {}
 
 def _obstacle_points_of(shape: str, mount: Asset) -> np.ndarray:
     if shape not in _OBSTACLE_POINTS:
-        from mani_skill_space.oracles.base import GROUND_MARGIN, _ground_points, surface_points
+        from mani_skill_space.oracles.base import standing_obstacle_points
 
-        points = surface_points(mount)
-        points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()]) - mount.frames["arm_mount"][:3, 3]
+        points = standing_obstacle_points(mount) - mount.frames["arm_mount"][:3, 3]
         _OBSTACLE_POINTS[shape] = np.ascontiguousarray(points, dtype=np.float64)
     return _OBSTACLE_POINTS[shape]

@@ -153,12 +153,9 @@ class Oracle(Policy):
             joint_vel_limits=JOINT_VELOCITY_LIMIT,
             joint_acc_limits=JOINT_ACCELERATION_LIMIT,
         )
-        # what the arm stands on: the mount (rover, station); a free-flying servicer's bus moves with the arm, so
-        # points fixed where it was would soon stand inside it (the arm never reaches back under its own base)
-        points = np.zeros((0, 3)) if getattr(env, "free_flyer", False) else _surface_points(env.mount, np.random.default_rng(0))
-        # the surface the arm stands on (ground or the station's platform) is a grid a little below it, so that
-        # the fingers may touch it but no link is planned into it
-        points = np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()])
+        # a free-flying servicer's bus moves with the arm, so points fixed where it was would soon stand inside it
+        # (the arm never reaches back under its own base)
+        points = standing_obstacle_points(None if getattr(env, "free_flyer", False) else env.mount)
         if obstacles is not None:
             points = np.concatenate([points, obstacles])
         solver.add_collision_pts(points)
@@ -674,6 +671,14 @@ class _ServicerArmSolver(PandaArmMotionPlanningSolver):
         planner.joint_vel_limits = np.asarray(planner.joint_vel_limits) * self.joint_vel_limits
         planner.joint_acc_limits = np.asarray(planner.joint_acc_limits) * self.joint_acc_limits
         return planner
+
+
+def standing_obstacle_points(mount) -> np.ndarray:
+    """What the arm stands on, as obstacle points (world frame): the mount's surface above the ground (none where
+    ``mount`` is None), and the surface it stands on (ground or the station's platform) as a grid a little below it,
+    so that the fingers may touch it but no link is planned into it."""
+    points = np.zeros((0, 3)) if mount is None else surface_points(mount)
+    return np.concatenate([points[points[:, 2] > GROUND_MARGIN], _ground_points()])
 
 
 def _ground_points() -> np.ndarray:
