@@ -686,3 +686,50 @@ def test_a_brisk_motion_goes_round_the_base_where_that_is_quicker_than_its_screw
     oracle = _PathsWithoutScrew(screw=screw, line=None, arc=arc, joint=None)
     path = oracle._motion_path(np.zeros(7), sapien.Pose(), acceleration)
     assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
+
+
+class _ClosingFingers:
+    """A stub env for ``Oracle.wait_for_grasp``: the arm still, the fingers closing ``closing`` metres a step until
+    ``grasped_after`` steps, when the grasp holds (never, for None)."""
+
+    def __init__(self, closing: float, grasped_after=None):
+        import torch
+        from types import SimpleNamespace
+
+        self.steps, self.closing, self.grasped_after = 0, closing, grasped_after
+        arm = SimpleNamespace(qpos=torch.zeros(1, 7))
+        self.agent = SimpleNamespace(controller=SimpleNamespace(controllers={"arm": arm}), robot=SimpleNamespace(get_qpos=self._qpos))
+
+    def _qpos(self):
+        import torch
+
+        finger = max(0.0, 0.04 - self.closing * self.steps)
+        return torch.tensor([[0.0] * 7 + [finger, finger]])
+
+    def is_grasping(self, actor):
+        import torch
+
+        return torch.tensor([self.grasped_after is not None and self.steps >= self.grasped_after])
+
+
+def _steps_waited(env) -> tuple[int, bool]:
+    from mani_skill_space.oracles.base import PlanningFailed
+
+    oracle = Oracle()
+    oracle.env, oracle.gripper = env, -1.0
+    try:
+        for _ in oracle.wait_for_grasp("peg", "the peg"):
+            env.steps += 1
+    except PlanningFailed:
+        return env.steps, False
+    return env.steps, True
+
+
+def test_the_grasp_wait_goes_on_while_the_fingers_close():
+    # slowed fingers (1 mm a step, traced on Solar Panel Assembly in pd_ee_delta_pose, seed 6014) that hold the peg
+    # after 14 steps: the old fixed wait of 8 steps gave up
+    assert _steps_waited(_ClosingFingers(0.001, grasped_after=14)) == (14, True)
+    # fingers that have stopped without holding anything: given up after the usual 8 steps
+    assert _steps_waited(_ClosingFingers(0.0)) == (8, False)
+    # fingers closing forever: given up after 40
+    assert _steps_waited(_ClosingFingers(0.0005)) == (40, False)
