@@ -181,12 +181,11 @@ def asset_generators() -> dict[str, Callable[[int], object]]:
     generators["peg and hole pair (procedural)"] = lambda seed: make_peg_hole_pair(seed)
     arm_base = make_rover().frames["arm_mount"][:3, 3]
     generators["peg and hole pair (as the env draws it: solvability checks, redraws)"] = lambda seed: reachable_peg_hole_pair(seed, DEFAULT_CLEARANCE, arm_base)
-    multi_peg_mount = make_rover(cargo_bin=False)
-    generators["peg and hole pair at Multi-Peg-in-Hole's outer module (checks with the arm's planning, redraws; cached on disk)"] = lambda seed: _multi_peg_pair(seed, multi_peg_mount)
+    bare_rover = make_rover(cargo_bin=False)  # Multi-Peg-in-Hole's and Solar Panel Assembly's mount
+    generators["peg and hole pair at Multi-Peg-in-Hole's outer module (checks with the arm's planning, redraws; cached on disk)"] = lambda seed: _multi_peg_pair(seed, bare_rover)
     generators["debris (procedural)"] = lambda seed: make_debris(seed)
     generators["solar panel set (procedural: 4 sockets, 4 pegs, panel)"] = _solar_panel_set
-    solar_mount = make_rover(cargo_bin=False)
-    generators["solar panel set (as the env draws it: solvability checks, redraws; the arm's planning cached on disk)"] = lambda seed: _reachable_solar_panel_set(seed, solar_mount)
+    generators["solar panel set (as the env draws it: solvability checks, redraws; the arm's planning cached on disk)"] = lambda seed: _reachable_solar_panel_set(seed, bare_rover)
     generators["rover"] = lambda seed: make_rover()
     generators["station"] = lambda seed: make_station()
     generators["sample tube (dataset, cached load)"] = lambda seed: load_dataset_object("sample_tube")

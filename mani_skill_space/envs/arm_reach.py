@@ -89,9 +89,7 @@ def faces_the_arm_inserts(
     ``hole_bottom`` (world, 4 x 4, z out of the socket) ``depth`` deep, for the arm described by ``urdf_path`` on
     ``mount`` (at its ``arm_mount`` frame), with ``extra_obstacles`` (world points) besides the mount and the
     ground. The verdicts are cached on disk (``procgen.cache``): planning takes tens of milliseconds a face."""
-    obstacles = _obstacle_points(mount)
-    if extra_obstacles is not None:
-        obstacles = np.ascontiguousarray(np.concatenate([obstacles, np.asarray(extra_obstacles, dtype=np.float64) - mount.frames["arm_mount"][:3, 3]]))
+    obstacles = planning_obstacle_points(mount, extra_obstacles)
     inputs = [np.asarray(a, dtype=np.float64) for a in (peg.collision_vertices, peg.frames["end_0"], faces, rest_xy, hole_bottom, [depth, peg.info["height"], peg.info["symmetry_order"]])]
     key = content_key(CHECK_VERSION, _description_key(urdf_path), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
 
@@ -207,6 +205,15 @@ def _planner_for(urdf_path: str, obstacle_points: bytes):
     # solution is collision-free (as the oracles' are) and no verdict depends on what the planner did before
     planner.planning_world.set_use_point_cloud(True)
     return planner
+
+
+def planning_obstacle_points(mount: Asset, extra_obstacles: Optional[np.ndarray] = None) -> np.ndarray:
+    """The points the check plans around, in the arm's base frame: what the arm stands on (``_obstacle_points``) and
+    ``extra_obstacles`` (world points)."""
+    obstacles = _obstacle_points(mount)
+    if extra_obstacles is None:
+        return obstacles
+    return np.ascontiguousarray(np.concatenate([obstacles, np.asarray(extra_obstacles, dtype=np.float64) - mount.frames["arm_mount"][:3, 3]]))
 
 
 def _obstacle_points(mount: Asset) -> np.ndarray:

@@ -534,13 +534,14 @@ class Oracle(Policy):
         ``closing_steps``: fingers that drag on the ground beside a lying peg close on it a millimetre a step (traced on
         Solar Panel Assembly in ``pd_ee_delta_pose``, Moon, seed 6014: still 2 mm short of the peg after 14 steps)."""
         self.phase = f"grasping {what}"
-        fingers = self.finger_qpos()
+        before = self.finger_qpos()
         for step in range(closing_steps):
             if bool(self.env.is_grasping(actor)[0]):
                 return
-            if step >= most_steps and np.abs(self.finger_qpos() - fingers).max() < FINGERS_STILL:
+            now = self.finger_qpos()
+            if step >= most_steps and np.abs(now - before).max() < FINGERS_STILL:
                 break
-            fingers = self.finger_qpos()
+            before = now
             yield self.hold_action()
         raise PlanningFailed(f"the grasp missed {what}")
 

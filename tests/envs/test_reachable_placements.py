@@ -228,8 +228,8 @@ def test_an_arm_check_verdict_does_not_depend_on_what_its_planner_checked_before
     arm = pair_arm_planning(rover, Panda.urdf_path, positions, 0)
     module = np.eye(4)
     module[:3, 3] = positions[0]
-    obstacles = np.concatenate([arm.extra_obstacles, arm_reach.module_obstacles(hole, module, peg.info["radius"])]) - rover.frames["arm_mount"][:3, 3]
-    points = np.ascontiguousarray(np.concatenate([arm_reach._obstacle_points(rover), obstacles])).tobytes()
+    obstacles = np.concatenate([arm.extra_obstacles, arm_reach.module_obstacles(hole, module, peg.info["radius"])])
+    points = arm_reach.planning_obstacle_points(rover, obstacles).tobytes()
     faces = peg_placement([peg], "cpu").rotations().double().numpy()
     args = (np.linalg.inv(rover.frames["arm_mount"]), peg)
     rest = (arm.rest_xy, module @ hole.frames["bottom"], hole.info["depth"], _twists(peg.info["symmetry_order"]))
