@@ -366,6 +366,24 @@ def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter
     assert (found is None) if chosen is None else np.array_equal(found[0], arms[chosen])
 
 
+@pytest.mark.parametrize(
+    "steps, margins, keep, chosen",
+    [
+        ((137, 85, 183), (0.02, 0.54, 0.7), -np.inf, 1),  # under a TCP controller: the quickest, whatever its push
+        ((137, 85, 183), (0.3, 0.05, 0.7), 0.1, 0),  # the quickest whose push keeps the margin asked for
+        ((137, 85, 85), (0.02, 0.05, 0.04), 0.1, 1),  # none keeps it: the quickest, the farther push among equals
+        ((), (), 0.1, None),  # no plan at all
+    ],
+)
+def test_the_quickest_plan_is_taken_among_those_whose_push_keeps_the_margin(steps, margins, keep, chosen):
+    from types import SimpleNamespace
+
+    plans = [(f"plan {i}", margin) for i, margin in enumerate(margins)]
+    planner = SimpleNamespace(_plan_steps=lambda start, plan: steps[int(plan.split()[1])])
+    found = PegInserter._quickest(planner, iter(plans), np.zeros(7), keep)
+    assert found == (None if chosen is None else f"plan {chosen}")
+
+
 class _ArmsLeftElsewhere(_ArmsOverTheHole):
     """...whose joint move to arm ``i`` leaves the arm at ``left[i]`` (None: the move stalls), as a TCP controller may."""
 

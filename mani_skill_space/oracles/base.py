@@ -287,9 +287,18 @@ class Oracle(Policy):
     def motion_end(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where ``screw_to(pose, acceleration=acceleration)`` from ``start`` would leave the arm (``_motion_path``), or None
         if it would fail: for checking a whole plan before moving."""
-        with self._speed(1.0, acceleration):
-            path = self._motion_path(start, pose, acceleration)
+        path = self._planned_motion(start, pose, acceleration)
         return None if path is None else path[-1][: len(start)]
+
+    def motion_steps(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[int]:
+        """How many control steps ``screw_to(pose, acceleration=acceleration)`` from ``start`` would take (as ``paced``
+        sends it, without settling), or None if it would fail."""
+        path = self._planned_motion(start, pose, acceleration)
+        return None if path is None else len(self.paced(path, start, acceleration))
+
+    def _planned_motion(self, start: np.ndarray, pose: sapien.Pose, acceleration: float) -> Optional[np.ndarray]:
+        with self._speed(1.0, acceleration):
+            return self._motion_path(start, pose, acceleration)
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
@@ -349,6 +358,10 @@ class Oracle(Policy):
         """The joint targets ``joint_move`` sends, one per control step, for its move from ``start`` to ``goal``."""
         with self._speed(1.0, acceleration):
             return self.paced(self._timed_path(start, goal), start, acceleration)
+
+    def joint_move_steps(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> int:
+        """How many control steps ``joint_move(goal)`` from ``start`` takes."""
+        return len(self._joint_move_path(start, goal, acceleration))
 
     def joint_move_end(self, start: np.ndarray, goal: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where ``joint_move(goal)`` from ``start`` leaves the arm: ``goal``, unless the oracle acts through a TCP
