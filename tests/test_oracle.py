@@ -367,21 +367,40 @@ def test_the_planned_push_keeps_away_from_the_joint_limits_where_it_can(inserter
 
 
 @pytest.mark.parametrize(
-    "steps, margins, keep, chosen",
+    "pre_grasp, swing, margins, keep, chosen, planned",
     [
-        ((137, 85, 183), (0.02, 0.54, 0.7), -np.inf, 1),  # under a TCP controller: the quickest, whatever its push
-        ((137, 85, 183), (0.3, 0.05, 0.7), 0.1, 0),  # the quickest whose push keeps the margin asked for
-        ((137, 85, 85), (0.02, 0.05, 0.04), 0.1, 1),  # none keeps it: the quickest, the farther push among equals
-        ((), (), 0.1, None),  # no plan at all
+        # under a TCP controller (no margin asked): the quickest; grasp 3's pre-grasp alone outlasts it, so it is not planned
+        ((20, 67, 18, 150), (117, 47, 200, 1), (0.02, 0.54, 0.7, 0.9), -np.inf, 1, [2, 0, 1]),
+        # the quickest whose push keeps the margin asked for, though another is quicker
+        ((20, 67, 18, 150), (117, 47, 200, 1), (0.3, 0.05, 0.7, 0.9), 0.1, 0, [2, 0, 1]),
+        # none keeps it: every grasp is planned and the quickest taken, the farther push among equals
+        ((20, 40, 18, 150), (50, 30, 60, 1), (0.02, 0.05, 0.04, 0.01), 0.1, 1, [2, 0, 1, 3]),
+        ((20, None), (50, 30), (0.02, 0.05), -np.inf, 0, [0]),  # no motion to grasp 1's pre-grasp pose
+        ((), (), (), 0.1, None, []),  # no grasp at all
     ],
 )
-def test_the_quickest_plan_is_taken_among_those_whose_push_keeps_the_margin(steps, margins, keep, chosen):
+def test_the_quickest_plan_is_taken_among_those_whose_push_keeps_the_margin(pre_grasp, swing, margins, keep, chosen, planned):
+    from contextlib import nullcontext
     from types import SimpleNamespace
 
-    plans = [(f"plan {i}", margin) for i, margin in enumerate(margins)]
-    planner = SimpleNamespace(_plan_steps=lambda start, plan: steps[int(plan.split()[1])])
-    found = PegInserter._quickest(planner, iter(plans), np.zeros(7), keep)
-    assert found == (None if chosen is None else f"plan {chosen}")
+    from mani_skill_space.oracles.insertion import InsertionSettings
+
+    planner = PegInserter.__new__(PegInserter)
+    planner.settings, planned_grasps = InsertionSettings(), []
+    grasps = [(sapien.Pose(p=[float(i), 0.0, 0.0]), True) for i in range(len(pre_grasp))]
+    planner.oracle = SimpleNamespace(motion_steps=lambda start, pose, acceleration: pre_grasp[round(pose.p[0])])
+    planner._reaching, planner._fingers_meet_sides = nullcontext, lambda grasp, points: True
+    planner._swing_steps = lambda plan: swing[plan[0]]
+
+    def feasible_plans(target, tip, start, outward, peg_points, candidates, straight_lift):
+        i = round(candidates[0][0].p[0])
+        planned_grasps.append(i)
+        yield (i, None, 0.0, None), margins[i]
+
+    planner._feasible_plans = feasible_plans
+    found = planner._quickest_plan(None, None, np.zeros(7), None, None, grasps, True, keep)
+    assert (found is None) if chosen is None else found[0] == chosen
+    assert planned_grasps == planned
 
 
 class _ArmsLeftElsewhere(_ArmsOverTheHole):

@@ -137,7 +137,7 @@ def test_fast_motions_are_slowed_to_the_speed_limit_and_slow_ones_kept(ee_env):
         ("PegInHoleAssembly-v1", "moon", "dataset", 6000),
         ("PegInHoleAssembly-v1", "moon", "procedural", 6001),
         # the first feasible plan's pre-grasp, grasp and swing take 137 steps and the push runs out of time; the
-        # quickest plan's take 85 (``PegInserter._quickest``)
+        # quickest plan's take 85 (``PegInserter._quickest_plan``)
         ("PegInHoleAssembly-v1", "moon", "procedural", 60028),
         ("DebrisCapture-v1", "orbit", "dataset", 6002),
         ("DebrisCapture-v1", "orbit", "procedural", 6000),

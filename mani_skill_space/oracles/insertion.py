@@ -300,12 +300,12 @@ class PegInserter:
         if getattr(self.oracle, "moves_in_straight_lines", False):  # the checked grasps with straight swings first
             groups = [(checked, True, True), (checked, False, True)] + groups
         for group, straight_lift, straight_swing in groups:
-            plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift, straight_swing)
-            if straight_swing:  # first choice only where its push keeps the margin asked for
-                plans = ((plan, margin) for plan, margin in plans if margin >= self.push_joint_margin)
             if self._takes_the_quickest_plan:
-                plan = self._quickest(plans, start, self.push_joint_margin)
+                plan = self._quickest_plan(target, tip, start, outward, peg_points, group, straight_lift, self.push_joint_margin)
             else:
+                plans = self._feasible_plans(target, tip, start, outward, peg_points, group, straight_lift, straight_swing)
+                if straight_swing:  # first choice only where its push keeps the margin asked for
+                    plans = ((plan, margin) for plan, margin in plans if margin >= self.push_joint_margin)
                 plan = _clear_else_first(plans, self.push_joint_margin)
             if plan is not None:
                 swing, grasp, twist, _ = plan
@@ -321,23 +321,34 @@ class PegInserter:
         straight lines (Solar Panel Assembly's, whose order is its own), the quickest feasible plan is taken."""
         return self.oracle.tcp_speed_limit is not None and not getattr(self.oracle, "moves_in_straight_lines", False)
 
-    def _quickest(self, plans: Iterable[tuple[Any, float]], start: np.ndarray, margin: float) -> Optional[Any]:
-        """Of ``plans`` (each with its push's joint-limit margin), the one whose long motions from ``start`` take the
-        fewest control steps (``_plan_steps``) among those whose push keeps ``margin`` from the limits, else among all;
-        the one whose push keeps farther from the limits among equals; None if there is none."""
-        timed = [(plan_margin < margin, self._plan_steps(start, plan), -plan_margin, index, plan) for index, (plan, plan_margin) in enumerate(plans)]
-        return min(timed, key=lambda entry: entry[:4])[4] if timed else None
+    def _quickest_plan(
+        self, target: PegTarget, tip: np.ndarray, start: np.ndarray, outward: np.ndarray, peg_points: np.ndarray, group: list, straight_lift: Optional[bool], margin: float
+    ) -> Optional[tuple[Swing, sapien.Pose, float, np.ndarray]]:
+        """Of the feasible plans of ``group``'s grasps (``_feasible_plans``), the one whose two long motions from
+        ``start`` take the fewest control steps at the oracle's pace (the empty hand's to the pre-grasp pose and the
+        swing over the hole: grasping and lifting take about as long whatever the plan) among those whose push keeps
+        ``margin`` from the joint limits, else among all; among equals, the push farther from the limits, then the
+        grasps' order; None if there is none. The grasps are planned in the order of their pre-grasp motions' steps,
+        and once a plan keeps the margin, a grasp whose pre-grasp motion alone takes as long is not planned further."""
+        usable = [index for index, (grasp, checked) in enumerate(group) if not checked or self._fingers_meet_sides(grasp, peg_points)]
+        best = None
+        with self._reaching():  # the blocks nested in it keep the same obstacles (``Oracle.obstacles_only``)
+            pre_grasp = {index: self.oracle.motion_steps(start, backed_off(group[index][0], PRE_GRASP_DISTANCE), self.settings.pre_grasp_acceleration) for index in usable}
+            for steps, index in sorted((steps, index) for index, steps in pre_grasp.items() if steps is not None):
+                if best is not None and not best[0][0] and steps >= best[0][1]:
+                    break
+                for rank, (plan, plan_margin) in enumerate(self._feasible_plans(target, tip, start, outward, peg_points, [group[index]], straight_lift)):
+                    key = (plan_margin < margin, steps + self._swing_steps(plan), -plan_margin, index, rank)
+                    if best is None or key < best[0]:
+                        best = (key, plan)
+        return None if best is None else best[1]
 
-    def _plan_steps(self, start: np.ndarray, plan: tuple[Swing, sapien.Pose, float, np.ndarray]) -> int:
-        """Control steps of a plan's (swing, grasp, twist, arm after the lift) two long motions from ``start`` at the
-        oracle's pace: the empty hand's to the pre-grasp pose and the swing over the hole (grasping and lifting take
-        about as long whatever the plan)."""
-        swing, grasp, _, lifted = plan
-        with self._reaching():
-            steps = self.oracle.motion_steps(start, backed_off(grasp, PRE_GRASP_DISTANCE), self.settings.pre_grasp_acceleration)
+    def _swing_steps(self, plan: tuple[Swing, sapien.Pose, float, np.ndarray]) -> int:
+        """Control steps of a plan's (swing, grasp, twist, arm after the lift) swing over the hole."""
+        swing, _, _, lifted = plan
         if swing.paths:
-            return steps + sum(len(path) for path in swing.paths)
-        return steps + self.oracle.joint_move_steps(lifted, swing.arm)
+            return sum(len(path) for path in swing.paths)
+        return self.oracle.joint_move_steps(lifted, swing.arm)
 
     def _feasible_plans(
         self,
