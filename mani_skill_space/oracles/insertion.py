@@ -285,7 +285,8 @@ class PegInserter:
         one. The joint-limit margin thus ranks above the grasps' order (a weaker grasp whose push keeps clear of the
         limits comes before a firm one whose push does not: measured, the stalled pushes cost more than the weaker
         grasps). The unchecked last resorts are only tried where no checked grasp is feasible: the first of them for which
-        the insertion is feasible is taken (with the twist whose push keeps the margin, if one does)."""
+        the insertion is feasible is taken (with the twist whose push keeps the margin, if one does). Under a TCP
+        controller (``_takes_the_quickest_plan``) the quickest plan of each of those groups is taken, not the first."""
         tip = target.end_frames()[end]
         outward = target.bottom[:3, 3] - self.oracle.solver.base_pose.p
         outward[2] = 0.0
