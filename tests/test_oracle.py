@@ -710,6 +710,56 @@ def test_without_a_screw_motion_the_hand_takes_its_line_else_the_quicker_of_arc_
         assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
 
 
+class _LinesUnderTcpControl(Oracle):
+    """A stand-in oracle whose TCP controller's straight line to any pose is ``line`` (arm targets; None: it stalls,
+    or there is no TCP controller with ``tcp=False``), free of collisions where ``free``; its screw motions are
+    recorded, not run."""
+
+    gripper = 1.0
+
+    def __init__(self, line, tcp=True, free=True):
+        self.line, self.free, self.screwed, self.limits = line, free, [], []
+        self.tcp_speed_limit = (0.03, 0.05) if tcp else None
+        self.line_follower = self._line if tcp else None
+
+    def _line(self, start, pose, limit):
+        self.limits.append(limit)
+        return self.line
+
+    def arm_qpos(self):
+        return np.zeros(7)
+
+    def path_is_free(self, start, goal, samples=20):
+        return self.free
+
+    def screw_to(self, pose, what, settle_steps=0, speed=1.0, acceleration=1.0):
+        self.screwed.append((what, settle_steps))
+        yield np.full(8, -1.0, dtype=np.float32)
+
+
+def test_under_a_tcp_controller_a_line_to_goes_straight_at_the_speed_limit_and_settles():
+    line = np.arange(1.0, 4.0)[:, None] * np.ones(7)
+    oracle = _LinesUnderTcpControl(line)
+    actions = np.stack(list(oracle.line_to(sapien.Pose(), "pre-insert", settle_steps=2)))
+    np.testing.assert_array_equal(actions[:, 0], [1.0, 2.0, 3.0, 3.0, 3.0])  # the line, then its end held
+    assert (actions[:, -1] == 1.0).all() and oracle.phase == "pre-insert" and not oracle.screwed
+    assert oracle.limits == [oracle.tcp_speed_limit]
+
+
+@pytest.mark.parametrize(
+    "line, tcp, free",
+    [
+        (np.ones((3, 7)), False, True),  # joint control: the screw motion
+        (None, True, True),  # the controller stalls short of the pose
+        (np.ones((3, 7)), True, False),  # the line collides
+    ],
+)
+def test_a_line_to_falls_back_on_the_screw_motion(line, tcp, free):
+    oracle = _LinesUnderTcpControl(line, tcp=tcp, free=free)
+    actions = list(oracle.line_to(sapien.Pose(), "grasp", settle_steps=4))
+    assert len(actions) == 1 and oracle.screwed == [("grasp", 4)]
+
+
 @pytest.mark.parametrize(
     "screw, arc, acceleration, chosen",
     [

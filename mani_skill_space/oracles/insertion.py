@@ -258,7 +258,7 @@ class PegInserter:
     def _lower_in(self, target: PegTarget, end: int, twist: float) -> Iterator[np.ndarray]:
         bottom, depth = target.bottom, target.depth
         for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
-            yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+            yield from self.oracle.line_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
         heights = _push_heights(depth + PRE_INSERT_GAP, self.settings.insert_step)
 
         def tip_goal(step: int) -> sapien.Pose:
