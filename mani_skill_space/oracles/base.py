@@ -211,8 +211,7 @@ class Oracle(Policy):
         ``pd_ee_delta_pose``, the tip's 7 cm down to its pre-insert pose, with the lag the swing before had left, took 18
         steps as a screw motion and 12 as the line."""
         if self.line_follower is not None:
-            start = self.arm_qpos()
-            path = self._free_hand_path(start, self.line_follower(start, pose, self.tcp_step_limit()))
+            path = self._hand_line(self.arm_qpos(), pose)
             if path is not None:
                 self.phase = what
                 yield from self._follow(np.concatenate([path, np.repeat(path[-1:], settle_steps, axis=0)]), retime=False)
@@ -334,6 +333,12 @@ class Oracle(Policy):
         collisions all the way; else None. The hand goes as fast as ``paced`` lets a motion at ``acceleration``."""
         if not self.moves_in_straight_lines:
             return None
+        return self._hand_line(start, pose, acceleration)
+
+    def _hand_line(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """The arm joint targets along which the TCP controller (``line_follower``) takes the hand in a straight line from
+        where ``start`` puts it to ``pose``, as fast as ``paced`` lets a motion at ``acceleration``, if it gets there with
+        the arm clear of collisions all the way; else None."""
         return self._free_hand_path(start, self.line_follower(start, pose, self.tcp_step_limit(acceleration)))
 
     def arcs_round_base(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> list[np.ndarray]:
