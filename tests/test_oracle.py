@@ -1,5 +1,7 @@
 """The oracle solves a fixed handful of seeds in every domain and asset source (physx_cpu, deterministic)."""
 
+from contextlib import contextmanager
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -820,3 +822,107 @@ def test_the_grasp_wait_goes_on_while_the_fingers_close():
     assert _steps_waited(_ClosingFingers(0.0)) == (8, False)
     # fingers closing forever: given up after 40
     assert _steps_waited(_ClosingFingers(0.0005)) == (40, False)
+    # fingers shut on nothing (1 cm a step, shut after 4): given up at once, not after the usual 8
+    assert _steps_waited(_ClosingFingers(0.01)) == (4, False)
+
+
+class _MissingOnce:
+    """A stand-in oracle for ``PegInserter._grasp``: records its motions and the gripper's, and its grasps miss
+    ``misses`` times before one holds."""
+
+    def __init__(self, misses: int):
+        self.misses, self.log = misses, []
+
+    def screw_to(self, pose, what, *args, **kwargs):
+        self.log.append(what)
+        self.hand = pose
+        yield what
+
+    def set_gripper(self, state):
+        self.log.append("open" if state > 0 else "close")
+        yield state
+
+    def first_reachable(self, poses, what):
+        self.away = poses
+        yield from self.screw_to(poses[0], what)
+
+    @contextmanager
+    def obstacles_only(self, choose):
+        self.backing_off_among = choose(self.obstacles)
+        yield
+
+    def wait_for_grasp(self, actor, what):
+        from mani_skill_space.oracles.base import GraspMissed
+
+        self.log.append("wait")
+        yield "wait"
+        if self.misses:
+            self.misses -= 1
+            raise GraspMissed(f"the grasp missed {what}")
+
+    def tcp_pose(self):
+        return self.hand
+
+
+_LYING_PEG = sapien.Pose([0.5, 0.1, 0.01], [np.cos(0.3), 0.0, 0.0, np.sin(0.3)])
+
+
+def _grasp_attempts(misses: int):
+    """Drives ``PegInserter._grasp`` with a stand-in oracle whose grasps miss ``misses`` times: (the oracle, the
+    ``missed`` grasps each plan was given, whether the grasp held)."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.base import GraspMissed
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    peg_pose = _LYING_PEG
+    target = SimpleNamespace(peg=SimpleNamespace(pose=SimpleNamespace(sp=peg_pose)))
+    planner = PegInserter.__new__(PegInserter)
+    planner.oracle, planner.settings, planner.reach_obstacles = _MissingOnce(misses), InsertionSettings(), None
+    first_grasp = peg_pose * sapien.Pose([0.0, 0.0, 0.02])
+    planner.oracle.obstacles = np.array([first_grasp.p + [0.0, 0.0, -0.05], first_grasp.p + [0.5, 0.0, 0.0]])  # the ground under it, far off
+    planner._end_toward_arm = lambda target: 0
+    plans = []
+
+    def plan_grasp(target, end, missed):
+        plans.append([m.copy() for m in missed])
+        return peg_pose * sapien.Pose([0.0, 0.0, 0.02 * len(plans)]), 0.0  # another grasp each time
+
+    planner._plan_grasp = plan_grasp
+    try:
+        for _ in planner._grasp(target):
+            pass
+    except GraspMissed:
+        return planner.oracle, plans, False
+    return planner.oracle, plans, True
+
+
+def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
+    from mani_skill_space.oracles.insertion import GRASP_ATTEMPTS
+
+    from mani_skill_space.oracles.insertion import PRE_GRASP_DISTANCE, backed_off
+
+    oracle, plans, held = _grasp_attempts(misses=1)
+    assert held
+    attempt = ["pre-grasp", "grasp", "close", "wait"]
+    assert oracle.log == attempt + ["open", "backing off the peg"] + attempt
+    assert len(plans[0]) == 0 and len(plans[1]) == 1
+    np.testing.assert_allclose(plans[1][0][:3, 3], [0.0, 0.0, 0.02], atol=1e-6)  # the missed grasp, in the peg's frame
+    missed_grasp = _LYING_PEG * sapien.Pose([0.0, 0.0, 0.02])  # the first plan's grasp
+    np.testing.assert_allclose(oracle.away[0].p, backed_off(missed_grasp, PRE_GRASP_DISTANCE).p, atol=1e-6)  # back along the approach
+    np.testing.assert_allclose(oracle.away[1].p, missed_grasp.p + [0.0, 0.0, PRE_GRASP_DISTANCE], atol=1e-6)  # else straight up
+    np.testing.assert_allclose(oracle.backing_off_among, oracle.obstacles[1:])  # planned without the points round the hand
+    oracle, plans, held = _grasp_attempts(misses=GRASP_ATTEMPTS)
+    assert not held and len(plans) == GRASP_ATTEMPTS and oracle.log[-1] == "wait"  # the last miss ends the plan
+
+
+def test_grasps_near_one_that_missed_are_not_tried_again():
+    from mani_skill_space.oracles.insertion import MISSED_GRASP_NEIGHBOURHOOD, _near_any
+
+    missed = sapien.Pose([0.01, 0.0, 0.02], [np.cos(0.4), 0.0, np.sin(0.4), 0.0]).to_transformation_matrix()
+    metres, radians = MISSED_GRASP_NEIGHBOURHOOD
+    near = missed @ sapien.Pose([0.0, metres * 0.9, 0.0], [np.cos(radians * 0.45), np.sin(radians * 0.45), 0.0, 0.0]).to_transformation_matrix()
+    farther = missed @ sapien.Pose([0.0, metres * 1.1, 0.0]).to_transformation_matrix()
+    turned = missed @ sapien.Pose(q=[np.cos(radians * 0.55), 0.0, 0.0, np.sin(radians * 0.55)]).to_transformation_matrix()
+    assert _near_any(near, [missed]) and _near_any(near, [farther, missed])
+    assert not _near_any(farther, [missed]) and not _near_any(turned, [missed]) and not _near_any(near, [])

@@ -48,6 +48,8 @@ Assembly, orbit: joint 3 from -2.8 to +2.8 rad in one step of the panel's lift),
 flung the panel away."""
 FINGERS_STILL = 1e-4
 """m: a finger that moves less than this in a control step has stopped closing (``wait_for_grasp``)."""
+FINGERS_SHUT = 5e-4
+"""m: fingers closed this far (each) hold nothing between them: the grasp has missed, whatever the wait."""
 JOINT_VELOCITY_LIMIT = 2.0
 JOINT_ACCELERATION_LIMIT = 4.0
 """rad/s and rad/s^2 for every arm joint: about 0.9x the Panda's velocity limits (ManiSkill's solutions use 0.9
@@ -57,6 +59,10 @@ the joint PD controller tracks closely."""
 
 class PlanningFailed(RuntimeError):
     pass
+
+
+class GraspMissed(PlanningFailed):
+    """The closed fingers hold nothing (``Oracle.wait_for_grasp``): the hand may let go and try another grasp."""
 
 
 class Oracle(Policy):
@@ -571,20 +577,21 @@ class Oracle(Policy):
 
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8, closing_steps: int = 40) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
-        PlanningFailed if it has not within ``most_steps``, or, while the fingers are still closing, within
+        GraspMissed if it has not within ``most_steps``, or, while the fingers are still closing, within
         ``closing_steps``: fingers that drag on the ground beside a lying peg close on it a millimetre a step (traced on
-        Solar Panel Assembly in ``pd_ee_delta_pose``, Moon, seed 6014: still 2 mm short of the peg after 14 steps)."""
+        Solar Panel Assembly in ``pd_ee_delta_pose``, Moon, seed 6014: still 2 mm short of the peg after 14 steps);
+        at once where the fingers have shut on nothing (``FINGERS_SHUT``), so that another grasp may be tried sooner."""
         self.phase = f"grasping {what}"
         before = self.finger_qpos()
         for step in range(closing_steps):
             if bool(self.env.is_grasping(actor)[0]):
                 return
             now = self.finger_qpos()
-            if step >= most_steps and np.abs(now - before).max() < FINGERS_STILL:
+            if np.all(now <= FINGERS_SHUT) or (step >= most_steps and np.abs(now - before).max() < FINGERS_STILL):
                 break
             before = now
             yield self.hold_action()
-        raise PlanningFailed(f"the grasp missed {what}")
+        raise GraspMissed(f"the grasp missed {what}")
 
     def finger_qpos(self) -> np.ndarray:
         """The gripper's finger joints now (m)."""

@@ -9,8 +9,9 @@ lift the peg, swing it over the entrance and push it straight to the bottom wins
 tip up above the entrance, re-measure the peg in the hand and correct, and servo the tip down the hole's axis,
 re-measuring the peg in the hand at every step (the clearance is 1 mm: open-loop paths drift more than that),
 its target never more than ``PUSH_LEAD`` ahead of the tip once it is in; a push that jams is backed off and tried
-again. The planner sees the hole's surroundings whole, except near
-the hole's axis while the peg goes in (``outside_keepout``), where the fingers holding the peg must pass.
+again. A grasp that misses the peg is let go of, the hand backs off (along its approach, else straight up) and the
+insertion is planned again with another grasp (``GRASP_ATTEMPTS``). The planner sees the hole's surroundings whole,
+except near the hole's axis while the peg goes in (``outside_keepout``), where the fingers holding the peg must pass.
 
 The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_space.envs.insertion``).
 """
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Any, Callable, Generator, Iterable, Iterator, Optional
+from typing import Any, Callable, Generator, Iterable, Iterator, Optional, Sequence
 
 import numpy as np
 import sapien
@@ -27,7 +28,9 @@ import sapien
 from mani_skill_space.envs.insertion import SIDE_TOLERANCE
 from mani_skill_space.oracles.base import (
     GRIPPER_CLOSED,
+    GRIPPER_OPEN,
     POINT_SPACING,
+    GraspMissed,
     Oracle,
     PlanningFailed,
     at_height,
@@ -37,10 +40,19 @@ from mani_skill_space.oracles.base import (
     lowest_point,
     open_finger_corners,
     pad_overlap,
+    raised,
     surface_points,
 )
 
 PRE_GRASP_DISTANCE = 0.08
+GRASP_ATTEMPTS = 2
+"""Grasps tried on a peg: one whose fingers close on nothing (``GraspMissed``) is let go of, the hand backs off along
+its approach (else straight up), and the insertion is planned again from where the peg lies, with no grasp near one
+that missed (``MISSED_GRASP_NEIGHBOURHOOD``)."""
+BACK_OFF_KEEPOUT = 0.1
+"""m: the obstacles this close to the TCP are left out of the planner's while the hand backs off a grasp that missed."""
+MISSED_GRASP_NEIGHBOURHOOD = (0.01, np.radians(15.0))
+"""(m, rad): a grasp this close to one that missed, in the peg's frame, is not tried again."""
 PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
@@ -224,15 +236,9 @@ class PegInserter:
 
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
         """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
-        end = self._end_toward_arm(target)
-        grasp, twist = self._plan_grasp(target, end)
+        end, twist = yield from self._grasp(target)
         bottom, depth = target.bottom, target.depth
-
         with self._reaching():
-            yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp", acceleration=self.settings.pre_grasp_acceleration)
-            yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
-            yield from self.oracle.set_gripper(GRIPPER_CLOSED)
-            yield from self.oracle.wait_for_grasp(target.peg, "the peg")
             yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
 
         for attempt in range(self.settings.insert_attempts):
@@ -244,6 +250,37 @@ class PegInserter:
                 break
         if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
             yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
+
+    def _grasp(self, target: PegTarget) -> Generator[np.ndarray, None, tuple[int, float]]:
+        """Plan the insertion and take the peg with its grasp, up to ``GRASP_ATTEMPTS`` times (each planned from where
+        the peg lies then, away from the grasps that missed); returns the peg's end to insert and the planned twist."""
+        missed: list[np.ndarray] = []
+        while True:
+            end = self._end_toward_arm(target)
+            grasp, twist = self._plan_grasp(target, end, missed)
+            grasp_on_peg = _in_frame_of(target.peg, grasp)
+            with self._reaching():
+                yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp", acceleration=self.settings.pre_grasp_acceleration)
+                yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
+                yield from self.oracle.set_gripper(GRIPPER_CLOSED)
+                try:
+                    yield from self.oracle.wait_for_grasp(target.peg, "the peg")
+                    return end, twist
+                except GraspMissed:
+                    missed.append(grasp_on_peg)
+                    if len(missed) >= GRASP_ATTEMPTS:
+                        raise
+                yield from self.oracle.set_gripper(GRIPPER_OPEN)
+                yield from self._back_off_the_peg()
+
+    def _back_off_the_peg(self) -> Iterator[np.ndarray]:
+        """From a grasp that missed, the open hand back along its approach, else straight up, planned without the
+        obstacles within ``BACK_OFF_KEEPOUT`` of the TCP: the hand came down that way, and the fingers pressed on the
+        ground beside the peg may start in collision with its points."""
+        hand = self.oracle.tcp_pose()
+        away = [move(hand, distance) for distance in (PRE_GRASP_DISTANCE, PRE_GRASP_DISTANCE / 2) for move in (backed_off, raised)]
+        with self.oracle.obstacles_only(lambda points: points[np.linalg.norm(points - hand.p, axis=1) > BACK_OFF_KEEPOUT]):
+            yield from self.oracle.first_reachable(away, "backing off the peg")
 
     def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Generator[np.ndarray, None, float]:
         """Line the peg up over the hole (if ``line_up``) and push it in; returns the twist it went in with."""
@@ -278,7 +315,7 @@ class PegInserter:
         return 1.0 - cls._tip_height(target, end) / target.depth
 
     # ------------------------------------------------------------------ planning
-    def _plan_grasp(self, target: PegTarget, end: int) -> tuple[sapien.Pose, float]:
+    def _plan_grasp(self, target: PegTarget, end: int, missed: Sequence[np.ndarray] = ()) -> tuple[sapien.Pose, float]:
         """The first grasp (and twist over the hole) for which the whole insertion is feasible from where the arm
         is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom, and whose push
         keeps ``PUSH_JOINT_MARGIN`` from the joint limits; where no checked grasp's push does, the first feasible
@@ -286,14 +323,15 @@ class PegInserter:
         limits comes before a firm one whose push does not: measured, the stalled pushes cost more than the weaker
         grasps). The unchecked last resorts are only tried where no checked grasp is feasible: the first of them for which
         the insertion is feasible is taken (with the twist whose push keeps the margin, if one does). Under a TCP
-        controller (``_takes_the_quickest_plan``) the quickest plan of each of those groups is taken, not the first."""
+        controller (``_takes_the_quickest_plan``) the quickest plan of each of those groups is taken, not the first.
+        No grasp near one in ``missed`` (in the peg's frame, ``MISSED_GRASP_NEIGHBOURHOOD``) is tried."""
         tip = target.end_frames()[end]
         outward = target.bottom[:3, 3] - self.oracle.solver.base_pose.p
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
-        candidates = list(self._grasp_candidates(target, tip, peg_points))
+        candidates = [(pose, checked) for pose, checked in self._grasp_candidates(target, tip, peg_points) if not _near_any(_in_frame_of(target.peg, pose), missed)]
         # all the checked grasps together (those lifting the peg straight up first, then the others), then each
         # unchecked last resort on its own
         checked = [c for c in candidates if c[1]]
@@ -672,6 +710,20 @@ def outside_hole_keepout(points: np.ndarray, bottom: np.ndarray, depth: float, p
     lateral = np.linalg.norm(offset - along[:, None] * bottom[None, :3, 2], axis=1)
     near_entrance = along > depth - KEEPOUT_BELOW_ENTRANCE
     return points[(lateral > peg_radius + AXIS_KEEPOUT) | ~near_entrance]
+
+
+def _in_frame_of(actor, pose: sapien.Pose) -> np.ndarray:
+    """``pose`` (world frame) in ``actor``'s frame now, as a 4x4 matrix."""
+    return np.linalg.inv(actor.pose.sp.to_transformation_matrix()) @ pose.to_transformation_matrix()
+
+
+def _near_any(pose: np.ndarray, others: Sequence[np.ndarray], neighbourhood: tuple[float, float] = MISSED_GRASP_NEIGHBOURHOOD) -> bool:
+    """Whether the 4x4 ``pose`` is within ``neighbourhood`` (m, rad) of any of ``others`` (in the same frame)."""
+    for other in others:
+        cosine = (np.trace(pose[:3, :3].T @ other[:3, :3]) - 1.0) / 2.0
+        if np.linalg.norm(pose[:3, 3] - other[:3, 3]) <= neighbourhood[0] and np.arccos(np.clip(cosine, -1.0, 1.0)) <= neighbourhood[1]:
+            return True
+    return False
 
 
 def _turn_between(a: sapien.Pose, b: sapien.Pose) -> float:
