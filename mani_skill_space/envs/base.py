@@ -57,6 +57,14 @@ GRASP_MIN_FORCE = 5.0
 FINGER_REACH = 0.15
 """m: no point of the Panda's fingers (open or closed) or finger links is farther than this from the TCP (they
 reach about 0.07 m): an object whose collision geometry is farther from the TCP cannot be touched by them."""
+GRASPABLE_SOLVER_POSITION_ITERATIONS = 30
+"""PhysX position iterations of every object the robot grasps (``build_graspable``); the hand holding one is solved
+with as many (PhysX solves an island with the most any of its bodies asks for). At ManiSkill's 15 for the whole scene
+the Panda's fingers, driven shut, sink into a light part: on a 24 g procedural peg (Multi-Peg-in-Hole, orbit, seed
+62016) each closed 1.6 mm farther than at 30, the peg carried 0.3 m/s and 18 rad/s of velocity that its pose in the
+hand did not show, and it sprang out of the fingers when the wrist turned; at 20 it still did, at 30 it stays
+(ManiSkill's ``SceneConfig`` notes that stable grasps want 20 or more). A ``sim_config`` asking for more iterations
+for the whole scene gives the grasped objects that many."""
 ARM_CONTACT_LIMIT = 10.0
 """Contact force (N) on an arm link above which the undesired-contact penalty applies."""
 WRIST_CAMERA_EYE = (0.1, 0.0, -0.07)
@@ -482,11 +490,13 @@ class SpaceManipulationEnv(BaseEnv):
         with ``self.factors.scaled`` before), remembered with its
         bounding radius so that ``is_grasping`` can skip its contact query when it is out of the fingers' reach.
         ``never_sleep``: PhysX never puts it to sleep, however slowly it moves (in zero gravity a slow drift is
-        real motion, e.g. of a part let go in orbit)."""
+        real motion, e.g. of a part let go in orbit). It is solved with ``GRASPABLE_SOLVER_POSITION_ITERATIONS``."""
         assets = [self.factors.with_material(asset) for asset in assets]
         actor = build_dynamic_per_env(self.scene, assets, name)
-        if never_sleep:
-            for body in actor._bodies:
+        iterations = max(GRASPABLE_SOLVER_POSITION_ITERATIONS, self.sim_config.scene_config.solver_position_iterations)
+        for body in actor._bodies:
+            body.solver_position_iterations = iterations
+            if never_sleep:
                 body.sleep_threshold = 0.0
         self._graspable_radius[name] = bounding_radius(assets)
         return actor
