@@ -885,7 +885,7 @@ def _grasp_attempts(misses: int):
     plans = []
 
     def plan_grasp(target, end, missed):
-        plans.append([m.copy() for m in missed])
+        plans.append(list(missed))
         return peg_pose * sapien.Pose([0.0, 0.0, 0.02 * len(plans)]), 0.0  # another grasp each time
 
     planner._plan_grasp = plan_grasp
@@ -907,7 +907,7 @@ def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
     attempt = ["pre-grasp", "grasp", "close", "wait"]
     assert oracle.log == attempt + ["open", "backing off the peg"] + attempt
     assert len(plans[0]) == 0 and len(plans[1]) == 1
-    np.testing.assert_allclose(plans[1][0][:3, 3], [0.0, 0.0, 0.02], atol=1e-6)  # the missed grasp, in the peg's frame
+    np.testing.assert_allclose(plans[1][0].p, [0.0, 0.0, 0.02], atol=1e-6)  # the missed grasp, in the peg's frame
     missed_grasp = _LYING_PEG * sapien.Pose([0.0, 0.0, 0.02])  # the first plan's grasp
     np.testing.assert_allclose(oracle.away[0].p, backed_off(missed_grasp, PRE_GRASP_DISTANCE).p, atol=1e-6)  # back along the approach
     np.testing.assert_allclose(oracle.away[1].p, missed_grasp.p + [0.0, 0.0, PRE_GRASP_DISTANCE], atol=1e-6)  # else straight up
@@ -917,12 +917,15 @@ def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
 
 
 def test_grasps_near_one_that_missed_are_not_tried_again():
-    from mani_skill_space.oracles.insertion import MISSED_GRASP_NEIGHBOURHOOD, _near_any
+    from mani_skill_space.oracles.insertion import GRASP_TILTS, MISSED_GRASP_NEIGHBOURHOOD, _near_any
 
-    missed = sapien.Pose([0.01, 0.0, 0.02], [np.cos(0.4), 0.0, np.sin(0.4), 0.0]).to_transformation_matrix()
+    missed = sapien.Pose([0.01, 0.0, 0.02], [np.cos(0.4), 0.0, np.sin(0.4), 0.0])
     metres, radians = MISSED_GRASP_NEIGHBOURHOOD
-    near = missed @ sapien.Pose([0.0, metres * 0.9, 0.0], [np.cos(radians * 0.45), np.sin(radians * 0.45), 0.0, 0.0]).to_transformation_matrix()
-    farther = missed @ sapien.Pose([0.0, metres * 1.1, 0.0]).to_transformation_matrix()
-    turned = missed @ sapien.Pose(q=[np.cos(radians * 0.55), 0.0, 0.0, np.sin(radians * 0.55)]).to_transformation_matrix()
+    near = missed * sapien.Pose([0.0, metres * 0.9, 0.0], [np.cos(radians * 0.45), np.sin(radians * 0.45), 0.0, 0.0])
+    farther = missed * sapien.Pose([0.0, metres * 1.1, 0.0])
+    turned = missed * sapien.Pose(q=[np.cos(radians * 0.55), 0.0, 0.0, np.sin(radians * 0.55)])
     assert _near_any(near, [missed]) and _near_any(near, [farther, missed])
     assert not _near_any(farther, [missed]) and not _near_any(turned, [missed]) and not _near_any(near, [])
+    tilt_spacing = np.diff(np.sort(GRASP_TILTS)).min()
+    next_tilt = missed * sapien.Pose(q=[np.cos(tilt_spacing / 2), 0.0, np.sin(tilt_spacing / 2), 0.0])
+    assert not _near_any(next_tilt, [missed])  # the next tilt at the same grasp point is another grasp

@@ -27,7 +27,7 @@ from mani_skill.utils.gym_utils import inv_scale_action
 from mani_skill.utils.structs.pose import Pose
 from scipy.spatial.transform import Rotation, Slerp
 
-from mani_skill_space.oracles.base import Oracle
+from mani_skill_space.oracles.base import Oracle, poses_within
 from mani_skill_space.policy import WrapsOracle
 
 CONTROL_MODE = "pd_ee_delta_pose"
@@ -122,7 +122,7 @@ class EndEffectorDeltaPose(WrapsOracle):
             if solved is not None:
                 qpos[0, arm] = torch.clamp(solved[0].to(qpos.dtype), low, high)
             followed.append(qpos[0, arm].cpu().numpy().astype(np.float64))
-        return np.stack(followed) if _poses_within(self.tcp_pose_at_base(followed[-1]), hands[-1], FOLLOW_TOLERANCE) else None
+        return np.stack(followed) if poses_within(self.tcp_pose_at_base(followed[-1]), hands[-1], FOLLOW_TOLERANCE) else None
 
     def tcp_pose_at_base(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(position, wxyz quaternion) of the controller's end-effector link, in the robot's base frame, with the arm
@@ -216,8 +216,3 @@ def clipped_arm_action(arm_action: np.ndarray, position_bound: float = 1.0, rota
         rotation = rotation * (rotation_bound / norm)
     return np.concatenate([position, rotation])
 
-
-def _poses_within(pose: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray], tolerance: tuple[float, float]) -> bool:
-    """Whether two (position, wxyz quaternion) poses are within ``tolerance`` (metres, radians) of each other."""
-    turn = 2.0 * np.arccos(min(1.0, abs(float(np.dot(pose[1], other[1])))))
-    return bool(np.linalg.norm(pose[0] - other[0]) <= tolerance[0] and turn <= tolerance[1])

@@ -40,6 +40,7 @@ from mani_skill_space.oracles.base import (
     lowest_point,
     open_finger_corners,
     pad_overlap,
+    poses_within,
     raised,
     surface_points,
 )
@@ -51,8 +52,9 @@ its approach (else straight up), and the insertion is planned again from where t
 that missed (``MISSED_GRASP_NEIGHBOURHOOD``)."""
 BACK_OFF_KEEPOUT = 0.1
 """m: the obstacles this close to the TCP are left out of the planner's while the hand backs off a grasp that missed."""
-MISSED_GRASP_NEIGHBOURHOOD = (0.01, np.radians(15.0))
-"""(m, rad): a grasp this close to one that missed, in the peg's frame, is not tried again."""
+MISSED_GRASP_NEIGHBOURHOOD = (0.01, np.radians(10.0))
+"""(m, rad): a grasp this close to one that missed, in the peg's frame, is not tried again. The angle stays clear of
+the 15 degrees between ``GRASP_TILTS``: the next tilt at the same grasp point may be tried."""
 PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
@@ -254,7 +256,7 @@ class PegInserter:
     def _grasp(self, target: PegTarget) -> Generator[np.ndarray, None, tuple[int, float]]:
         """Plan the insertion and take the peg with its grasp, up to ``GRASP_ATTEMPTS`` times (each planned from where
         the peg lies then, away from the grasps that missed); returns the peg's end to insert and the planned twist."""
-        missed: list[np.ndarray] = []
+        missed: list[sapien.Pose] = []
         while True:
             end = self._end_toward_arm(target)
             grasp, twist = self._plan_grasp(target, end, missed)
@@ -315,7 +317,7 @@ class PegInserter:
         return 1.0 - cls._tip_height(target, end) / target.depth
 
     # ------------------------------------------------------------------ planning
-    def _plan_grasp(self, target: PegTarget, end: int, missed: Sequence[np.ndarray] = ()) -> tuple[sapien.Pose, float]:
+    def _plan_grasp(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose] = ()) -> tuple[sapien.Pose, float]:
         """The first grasp (and twist over the hole) for which the whole insertion is feasible from where the arm
         is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom, and whose push
         keeps ``PUSH_JOINT_MARGIN`` from the joint limits; where no checked grasp's push does, the first feasible
@@ -712,18 +714,14 @@ def outside_hole_keepout(points: np.ndarray, bottom: np.ndarray, depth: float, p
     return points[(lateral > peg_radius + AXIS_KEEPOUT) | ~near_entrance]
 
 
-def _in_frame_of(actor, pose: sapien.Pose) -> np.ndarray:
-    """``pose`` (world frame) in ``actor``'s frame now, as a 4x4 matrix."""
-    return np.linalg.inv(actor.pose.sp.to_transformation_matrix()) @ pose.to_transformation_matrix()
+def _in_frame_of(actor, pose: sapien.Pose) -> sapien.Pose:
+    """``pose`` (world frame) in ``actor``'s frame now."""
+    return actor.pose.sp.inv() * pose
 
 
-def _near_any(pose: np.ndarray, others: Sequence[np.ndarray], neighbourhood: tuple[float, float] = MISSED_GRASP_NEIGHBOURHOOD) -> bool:
-    """Whether the 4x4 ``pose`` is within ``neighbourhood`` (m, rad) of any of ``others`` (in the same frame)."""
-    for other in others:
-        cosine = (np.trace(pose[:3, :3].T @ other[:3, :3]) - 1.0) / 2.0
-        if np.linalg.norm(pose[:3, 3] - other[:3, 3]) <= neighbourhood[0] and np.arccos(np.clip(cosine, -1.0, 1.0)) <= neighbourhood[1]:
-            return True
-    return False
+def _near_any(pose: sapien.Pose, others: Sequence[sapien.Pose], neighbourhood: tuple[float, float] = MISSED_GRASP_NEIGHBOURHOOD) -> bool:
+    """Whether ``pose`` is within ``neighbourhood`` (m, rad) of any of ``others`` (in the same frame)."""
+    return any(poses_within((pose.p, pose.q), (other.p, other.q), neighbourhood) for other in others)
 
 
 def _turn_between(a: sapien.Pose, b: sapien.Pose) -> float:
