@@ -13,6 +13,7 @@ GRASPABLES = {
     "PegInHoleAssembly-v1": lambda u: [u.peg],
     "DebrisCapture-v1": lambda u: [u.debris],
     "MultiPegInHoleAssembly-v1": lambda u: u.pegs,
+    "MultiSampleCollection-v1": lambda u: u.samples,
     "SolarPanelAssembly-v1": lambda u: [*u.pegs, u.panel],
 }
 
