@@ -684,10 +684,14 @@ def at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
     return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
 
 
+def turn_between(quaternion: np.ndarray, other: np.ndarray) -> float:
+    """The angle (rad) of the rotation from one wxyz quaternion's orientation to the other's."""
+    return float(2.0 * np.arccos(min(1.0, abs(float(np.dot(quaternion, other))))))
+
+
 def poses_within(pose: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray], tolerance: tuple[float, float]) -> bool:
     """Whether two (position, wxyz quaternion) poses are within ``tolerance`` (metres, radians) of each other."""
-    turn = 2.0 * np.arccos(min(1.0, abs(float(np.dot(pose[1], other[1])))))
-    return bool(np.linalg.norm(np.asarray(pose[0]) - np.asarray(other[0])) <= tolerance[0] and turn <= tolerance[1])
+    return bool(np.linalg.norm(np.asarray(pose[0]) - np.asarray(other[0])) <= tolerance[0] and turn_between(pose[1], other[1]) <= tolerance[1])
 
 
 def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:

@@ -43,6 +43,7 @@ from mani_skill_space.oracles.base import (
     poses_within,
     raised,
     surface_points,
+    turn_between,
 )
 
 PRE_GRASP_DISTANCE = 0.08
@@ -617,7 +618,7 @@ class PegInserter:
         if not getattr(self.oracle, "moves_in_straight_lines", False):
             return turns
         hand = self.oracle.tcp_pose()
-        return tuple(sorted(turns, key=lambda pose: _turn_between(hand, pose)))
+        return tuple(sorted(turns, key=lambda pose: turn_between(hand.q, pose.q)))
 
     @staticmethod
     def _surface_rise(target: PegTarget) -> float:
@@ -722,11 +723,6 @@ def _in_frame_of(actor, pose: sapien.Pose) -> sapien.Pose:
 def _near_any(pose: sapien.Pose, others: Sequence[sapien.Pose], neighbourhood: tuple[float, float] = MISSED_GRASP_NEIGHBOURHOOD) -> bool:
     """Whether ``pose`` is within ``neighbourhood`` (m, rad) of any of ``others`` (in the same frame)."""
     return any(poses_within((pose.p, pose.q), (other.p, other.q), neighbourhood) for other in others)
-
-
-def _turn_between(a: sapien.Pose, b: sapien.Pose) -> float:
-    """The angle (rad) of the rotation from ``a``'s orientation to ``b``'s."""
-    return float(2.0 * np.arccos(min(1.0, abs(float(np.dot(a.q, b.q))))))
 
 
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
