@@ -268,6 +268,31 @@ def test_an_oracle_can_plan_with_the_fingers_open_as_they_are():
     assert free == {False: True, True: False}
 
 
+def test_the_motions_that_will_carry_a_peg_are_planned_with_the_fingers_closed_on_it():
+    """Before the grasp the fingers are open, but the swing over the hole and the push will carry the peg in closed
+    ones: inside ``fingers_planned_at`` the planner's fingers are where the block puts them, and after it where the
+    simulated ones are again (traced on Multi-Peg-in-Hole, Earth, seed 62006: every push into the last, shallow hole
+    was refused for the open fingers' sake)."""
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=0)
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    oracle.reset(env, 0)
+    outer_box = max(_finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
+    in_the_open_finger = (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
+    oracle.make_solver(env.unwrapped, obstacles=in_the_open_finger[None])
+    here = oracle.arm_qpos()
+    holding = np.full_like(oracle.finger_qpos(), 0.01)
+    before = oracle.path_is_free(here, here)
+    with oracle.fingers_planned_at(holding):
+        inside = oracle.path_is_free(here, here)
+        with oracle.fingers_planned_at(oracle.finger_qpos()):
+            nested = oracle.path_is_free(here, here)
+        after_nested = oracle.path_is_free(here, here)
+    after = oracle.path_is_free(here, here)
+    env.close()
+    assert (before, inside, nested, after_nested, after) == (False, True, False, True, False)
+
+
 def test_an_episode_that_ends_before_the_plan_says_what_the_oracle_was_doing():
     """Where the oracle neither gave up nor succeeded, the episode's failure says what it was doing when time ran out
     (or, if its plan had ended, what it did last), so that a suite's results tell a slow motion from a lost object."""

@@ -119,6 +119,9 @@ class Oracle(Policy):
     holds) when it checks a motion for collisions. mplib's model otherwise keeps them closed, i.e. an open finger's
     outer side 4 cm farther out than planned: room enough to sweep through a thin peg standing beside the path."""
 
+    _planned_fingers: Optional[np.ndarray] = None
+    """The finger joints of ``fingers_planned_at``'s block, inside one."""
+
     def reset(self, env, seed: int) -> None:
         self.env = env.unwrapped
         self.gripper = GRIPPER_OPEN
@@ -225,15 +228,28 @@ class Oracle(Policy):
         yield from self.screw_to(pose, what, settle_steps)
 
     def _plan_with_the_fingers_now(self) -> None:
-        """Where ``plans_with_the_fingers_as_they_are``, the planner's finger joints set to the simulated ones (the
-        arm joints of every check come from the caller; ``pad_qpos`` fills the rest from the model)."""
+        """Where ``plans_with_the_fingers_as_they_are``, the planner's finger joints set to the simulated ones, or to
+        those of ``fingers_planned_at`` inside its block (the arm joints of every check come from the caller;
+        ``pad_qpos`` fills the rest from the model)."""
         if not self.plans_with_the_fingers_as_they_are:
             return
         model = self.solver.planner.robot
         qpos = model.get_qpos()
-        fingers = self.finger_qpos()
+        fingers = self.finger_qpos() if self._planned_fingers is None else self._planned_fingers
         qpos[len(qpos) - len(fingers) :] = fingers
         model.set_qpos(qpos, True)
+
+    @contextmanager
+    def fingers_planned_at(self, finger_qpos: np.ndarray):
+        """Inside the block, an oracle that ``plans_with_the_fingers_as_they_are`` plans with its fingers at
+        ``finger_qpos`` instead: for the motions that will carry an object the open hand has not taken yet, the
+        fingers as they will be then, closed on it (blocks nest, and each restores the fingers in use before it)."""
+        previous = self._planned_fingers
+        self._planned_fingers = np.asarray(finger_qpos, dtype=np.float64)
+        try:
+            yield
+        finally:
+            self._planned_fingers = previous
 
     def _plan_from_the_base_now(self) -> None:
         """On a free-flying servicer, plan from the bus's pose now (it moves as the arm does)."""

@@ -420,11 +420,12 @@ class PegInserter:
             hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
+            holding = np.full_like(self.oracle.finger_qpos(), grip_half_width)  # each finger closed on the peg
             for twist in sorted(_twists(target.symmetry), key=score):
                 pressed = _along_axis(bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand)
                 if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
-                with self._reaching():
+                with self._reaching(), self.oracle.fingers_planned_at(holding):
                     found = self._swing_over(target, twist, tip_in_hand, start=lifted, straight_only=straight_swing)
                 if found is not None:
                     yield (found[0], grasp, float(twist), lifted), found[1]
