@@ -271,8 +271,8 @@ def test_an_oracle_can_plan_with_the_fingers_open_as_they_are():
 def test_the_motions_that_will_carry_a_peg_are_planned_with_the_fingers_closed_on_it():
     """Before the grasp the fingers are open, but the swing over the hole and the push will carry the peg in closed
     ones: inside ``fingers_planned_at`` the planner's fingers are where the block puts them, and after it where the
-    simulated ones are again (traced on Multi-Peg-in-Hole, Earth, seed 62006: every push into the last, shallow hole
-    was refused for the open fingers' sake)."""
+    simulated ones are again (traced on Multi-Peg-in-Hole, Earth, seed 62006: pushes into the last, shallow hole that
+    clear the module with the fingers closed were refused for the open fingers' sake)."""
     env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
     env.reset(seed=0)
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
@@ -942,7 +942,7 @@ def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
 
 
 def test_grasps_near_one_that_missed_are_not_tried_again():
-    from mani_skill_space.oracles.insertion import GRASP_TILTS, MISSED_GRASP_NEIGHBOURHOOD, _near_any
+    from mani_skill_space.oracles.insertion import GRASP_TILTS, HALF_TURN_ABOUT_APPROACH, MISSED_GRASP_NEIGHBOURHOOD, _near_any
 
     missed = sapien.Pose([0.01, 0.0, 0.02], [np.cos(0.4), 0.0, np.sin(0.4), 0.0])
     metres, radians = MISSED_GRASP_NEIGHBOURHOOD
@@ -954,3 +954,6 @@ def test_grasps_near_one_that_missed_are_not_tried_again():
     tilt_spacing = np.diff(np.sort(GRASP_TILTS)).min()
     next_tilt = missed * sapien.Pose(q=[np.cos(tilt_spacing / 2), 0.0, np.sin(tilt_spacing / 2), 0.0])
     assert not _near_any(next_tilt, [missed])  # the next tilt at the same grasp point is another grasp
+    half_turn = sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
+    assert _near_any(missed * half_turn, [missed]) and _near_any(near * half_turn, [missed])  # the same grip, fingers swapped
+    assert not _near_any(farther * half_turn, [missed])

@@ -54,8 +54,9 @@ that missed (``MISSED_GRASP_NEIGHBOURHOOD``)."""
 BACK_OFF_KEEPOUT = 0.1
 """m: the obstacles this close to the TCP are left out of the planner's while the hand backs off a grasp that missed."""
 MISSED_GRASP_NEIGHBOURHOOD = (0.01, np.radians(10.0))
-"""(m, rad): a grasp this close to one that missed, in the peg's frame, is not tried again. The angle stays clear of
-the 15 degrees between ``GRASP_TILTS``: the next tilt at the same grasp point may be tried."""
+"""(m, rad): a grasp this close to one that missed, or to its twin with the wrist turned half a turn (the same grip,
+the fingers swapped), in the peg's frame, is not tried again. The angle stays clear of the 15 degrees between
+``GRASP_TILTS``: the next tilt at the same grasp point may be tried."""
 PAD_REACH = 0.016
 """How far (m) the Panda's finger pads reach along the peg from the grasp point, with the hand tilted by
 GRASP_TILT; they must stay above the module while the peg goes in."""
@@ -722,8 +723,11 @@ def _in_frame_of(actor, pose: sapien.Pose) -> sapien.Pose:
 
 
 def _near_any(pose: sapien.Pose, others: Sequence[sapien.Pose], neighbourhood: tuple[float, float] = MISSED_GRASP_NEIGHBOURHOOD) -> bool:
-    """Whether ``pose`` is within ``neighbourhood`` (m, rad) of any of ``others`` (in the same frame)."""
-    return any(poses_within((pose.p, pose.q), (other.p, other.q), neighbourhood) for other in others)
+    """Whether the grip of the hand at ``pose`` is within ``neighbourhood`` (m, rad) of that of any of ``others`` (in
+    the same frame): a hand turned half a turn about its approach grips the same way (its fingers swapped), so each of
+    ``others`` counts with its wrist-turned twin."""
+    twins = [twin for other in others for twin in (other, other * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH))]
+    return any(poses_within((pose.p, pose.q), (twin.p, twin.q), neighbourhood) for twin in twins)
 
 
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
