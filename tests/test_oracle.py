@@ -248,38 +248,39 @@ def test_pad_overlap_is_the_share_of_the_pad_the_object_covers_seen_along_the_cl
     assert pad_overlap(turned, moved, PAD, gap) == pytest.approx(overlap, abs=1e-6)
 
 
-def test_an_oracle_can_plan_with_the_fingers_open_as_they_are():
-    """mplib's Panda keeps its fingers closed: a point inside the open left finger is no obstacle to it, unless the
-    oracle plans with the fingers as they are (the multi-peg oracle does: its open hand passes standing pegs)."""
+@pytest.fixture
+def multi_peg_oracle():
+    """The multi-peg oracle at the start of an episode, and a point (world) inside its open outer finger."""
     env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
     env.reset(seed=0)
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
     oracle.reset(env, 0)
-    assert oracle.plans_with_the_fingers_as_they_are and not oracle_for("PegInHoleAssembly-v1").plans_with_the_fingers_as_they_are
     outer_box = max(_finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
-    in_the_open_finger = (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
+    yield oracle, (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
+    env.close()
+
+
+def test_an_oracle_can_plan_with_the_fingers_open_as_they_are(multi_peg_oracle):
+    """mplib's Panda keeps its fingers closed: a point inside the open left finger is no obstacle to it, unless the
+    oracle plans with the fingers as they are (the multi-peg oracle does: its open hand passes standing pegs)."""
+    oracle, in_the_open_finger = multi_peg_oracle
+    assert oracle.plans_with_the_fingers_as_they_are and not oracle_for("PegInHoleAssembly-v1").plans_with_the_fingers_as_they_are
     here = oracle.arm_qpos()
     free = {}
     for as_they_are in (False, True):
         oracle.plans_with_the_fingers_as_they_are = as_they_are
-        oracle.make_solver(env.unwrapped, obstacles=in_the_open_finger[None])
+        oracle.make_solver(oracle.env, obstacles=in_the_open_finger[None])
         free[as_they_are] = oracle.path_is_free(here, here)
-    env.close()
     assert free == {False: True, True: False}
 
 
-def test_the_motions_that_will_carry_a_peg_are_planned_with_the_fingers_closed_on_it():
+def test_the_motions_that_will_carry_a_peg_are_planned_with_the_fingers_closed_on_it(multi_peg_oracle):
     """Before the grasp the fingers are open, but the swing over the hole and the push will carry the peg in closed
     ones: inside ``fingers_planned_at`` the planner's fingers are where the block puts them, and after it where the
     simulated ones are again (traced on Multi-Peg-in-Hole, Earth, seed 62006: pushes into the last, shallow hole that
     clear the module with the fingers closed were refused for the open fingers' sake)."""
-    env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
-    env.reset(seed=0)
-    oracle = oracle_for("MultiPegInHoleAssembly-v1")
-    oracle.reset(env, 0)
-    outer_box = max(_finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
-    in_the_open_finger = (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
-    oracle.make_solver(env.unwrapped, obstacles=in_the_open_finger[None])
+    oracle, in_the_open_finger = multi_peg_oracle
+    oracle.make_solver(oracle.env, obstacles=in_the_open_finger[None])
     here = oracle.arm_qpos()
     holding = np.full_like(oracle.finger_qpos(), 0.01)
     before = oracle.path_is_free(here, here)
@@ -289,7 +290,6 @@ def test_the_motions_that_will_carry_a_peg_are_planned_with_the_fingers_closed_o
             nested = oracle.path_is_free(here, here)
         after_nested = oracle.path_is_free(here, here)
     after = oracle.path_is_free(here, here)
-    env.close()
     assert (before, inside, nested, after_nested, after) == (False, True, False, True, False)
 
 
@@ -942,7 +942,8 @@ def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
 
 
 def test_grasps_near_one_that_missed_are_not_tried_again():
-    from mani_skill_space.oracles.insertion import GRASP_TILTS, HALF_TURN_ABOUT_APPROACH, MISSED_GRASP_NEIGHBOURHOOD, _near_any
+    from mani_skill_space.oracles.base import wrist_turned
+    from mani_skill_space.oracles.insertion import GRASP_TILTS, MISSED_GRASP_NEIGHBOURHOOD, _near_any
 
     missed = sapien.Pose([0.01, 0.0, 0.02], [np.cos(0.4), 0.0, np.sin(0.4), 0.0])
     metres, radians = MISSED_GRASP_NEIGHBOURHOOD
@@ -954,6 +955,5 @@ def test_grasps_near_one_that_missed_are_not_tried_again():
     tilt_spacing = np.diff(np.sort(GRASP_TILTS)).min()
     next_tilt = missed * sapien.Pose(q=[np.cos(tilt_spacing / 2), 0.0, np.sin(tilt_spacing / 2), 0.0])
     assert not _near_any(next_tilt, [missed])  # the next tilt at the same grasp point is another grasp
-    half_turn = sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
-    assert _near_any(missed * half_turn, [missed]) and _near_any(near * half_turn, [missed])  # the same grip, fingers swapped
-    assert not _near_any(farther * half_turn, [missed])
+    assert _near_any(wrist_turned(missed), [missed]) and _near_any(wrist_turned(near), [missed])  # the same grip, fingers swapped
+    assert not _near_any(wrist_turned(farther), [missed])

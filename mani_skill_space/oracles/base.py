@@ -183,7 +183,7 @@ class Oracle(Policy):
         """``pose`` and the same grasp half a turn about its approach axis (the fingers are alike), the one whose
         fingers close nearer the way the hand's close now first: the hand turns less to get there (in
         ``pd_ee_delta_pose``, which turns the hand at most 0.1 rad a step, up to seconds less)."""
-        turned = pose * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
+        turned = wrist_turned(pose)
         closing_now = self.tcp_pose().to_transformation_matrix()[:3, 1]
         return (pose, turned) if pose.to_transformation_matrix()[:3, 1] @ closing_now >= 0 else (turned, pose)
 
@@ -698,6 +698,11 @@ def raised(pose: sapien.Pose, height: float) -> sapien.Pose:
 def at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
     """``pose`` moved vertically to ``height`` (world z)."""
     return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
+
+
+def wrist_turned(pose: sapien.Pose) -> sapien.Pose:
+    """The hand at ``pose`` turned half a turn about its approach axis: the same grip, its fingers swapped."""
+    return pose * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)
 
 
 def turn_between(quaternion: np.ndarray, other: np.ndarray) -> float:

@@ -44,6 +44,7 @@ from mani_skill_space.oracles.base import (
     raised,
     surface_points,
     turn_between,
+    wrist_turned,
 )
 
 PRE_GRASP_DISTANCE = 0.08
@@ -83,8 +84,6 @@ firmly; the others are tried after every firm one, those meeting more of it firs
 its end flicks it away as the fingers close, or lets it turn in the hand)."""
 GRASP_ROLLS = np.radians([0.0, 25.0, -25.0])
 """...and rolled about the peg's axis by one of these (from straight above first)."""
-HALF_TURN_ABOUT_APPROACH = np.array([0.0, 0.0, 0.0, 1.0])
-"""wxyz: the hand turned half a turn about its approach axis grips the same way with the wrist turned."""
 ROUND_PEG_TWISTS = 8
 """Candidate twists tried for a peg that fits the hole at any twist."""
 APPROACH_GAP = 0.1
@@ -616,7 +615,7 @@ class PegInserter:
         """``grasp`` and the same grip with the hand turned half a turn about its approach; where the oracle moves in
         straight lines under a TCP controller, the one the hand turns less to reach from where it is first: turning is
         what bounds that controller (a pre-grasp turning 3 rad takes 66 steps)."""
-        turns = (grasp, grasp * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH))
+        turns = (grasp, wrist_turned(grasp))
         if not getattr(self.oracle, "moves_in_straight_lines", False):
             return turns
         hand = self.oracle.tcp_pose()
@@ -726,7 +725,7 @@ def _near_any(pose: sapien.Pose, others: Sequence[sapien.Pose], neighbourhood: t
     """Whether the grip of the hand at ``pose`` is within ``neighbourhood`` (m, rad) of that of any of ``others`` (in
     the same frame): a hand turned half a turn about its approach grips the same way (its fingers swapped), so each of
     ``others`` counts with its wrist-turned twin."""
-    twins = [twin for other in others for twin in (other, other * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH))]
+    twins = [twin for other in others for twin in (other, wrist_turned(other))]
     return any(poses_within((pose.p, pose.q), (twin.p, twin.q), neighbourhood) for twin in twins)
 
 
