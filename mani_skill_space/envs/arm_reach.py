@@ -173,11 +173,72 @@ def _screw_reaches(planner, qpos: np.ndarray, pose_in_base: np.ndarray) -> bool:
     from ``qpos`` to ``pose_in_base`` without touching the obstacles."""
     from mani_skill_space.oracles.base import FINE_SCREW_STEP
 
-    try:
-        result = planner.plan_screw(_pose_vector(pose_in_base), qpos.copy(), qpos_step=FINE_SCREW_STEP, time_step=0.05, use_point_cloud=True)
-    except RuntimeError:  # mplib cannot time a path of (almost) zero length: already there
-        return True
-    return result["status"] == "Success"
+    return screw_path_is_free(planner, qpos, _pose_vector(pose_in_base), FINE_SCREW_STEP)
+
+
+def screw_path_is_free(planner, qpos: np.ndarray, target_pose: np.ndarray, qpos_step: float) -> bool:
+    """``planner.plan_screw(target_pose, qpos, qpos_step, use_point_cloud=True)["status"] == "Success"`` (mplib
+    0.1), without the path's time parameterisation: the same steps along the screw from ``qpos`` to
+    ``target_pose`` ([x, y, z, qw, qx, qy, qz], the planner's world frame), each checked against the joint limits
+    and the obstacles, but no TOPP-RA (a third of ``plan_screw``'s time, and it cannot fail a path mplib found
+    free). A solvability check needs only the verdict; ``tests/test_arm_reach.py`` checks that it is mplib's."""
+    planner.planning_world.set_use_point_cloud(True)
+    planner.planning_world.set_use_attach(False)
+    qpos = planner.pad_qpos(np.array(qpos, dtype=np.float64))
+    planner.robot.set_qpos(qpos, True)
+    target = _pose_matrix(planner.transform_goal_to_wrt_base(np.asarray(target_pose, dtype=np.float64)))
+    model = planner.pinocchio_model
+    model.compute_forward_kinematics(qpos)
+    tcp = planner.link_name_2_idx[planner.move_group]
+    twist = _screw_coordinates(target @ np.linalg.inv(_pose_matrix(model.get_link_pose(tcp))))
+    if twist is None:
+        return False
+    joints = planner.move_group_joint_indices
+    limits = np.asarray(planner.joint_limits)
+    while True:
+        model.compute_full_jacobian(qpos)
+        jacobian = model.get_link_jacobian(tcp, local=False)
+        delta_q = np.linalg.pinv(jacobian) @ twist
+        delta_q *= qpos_step / np.linalg.norm(delta_q)
+        delta_twist = jacobian @ delta_q
+        last = np.linalg.norm(delta_twist) > np.linalg.norm(twist)
+        if last:
+            ratio = np.linalg.norm(twist) / np.linalg.norm(delta_twist)
+            delta_q, delta_twist = delta_q * ratio, delta_twist * ratio
+        qpos += delta_q.reshape(-1)
+        twist -= delta_twist
+        within_limits = bool(np.all((qpos >= limits[:, 0] - 1e-3) & (qpos <= limits[:, 1] + 1e-3)))
+        planner.planning_world.set_qpos_all(qpos[joints])
+        if np.linalg.norm(delta_twist) < 1e-4 or planner.planning_world.collide() or not within_limits:
+            return False
+        if last:
+            return True
+
+
+def _pose_matrix(pose: np.ndarray) -> np.ndarray:
+    from transforms3d.quaternions import quat2mat
+
+    matrix = np.eye(4)
+    matrix[:3, 3] = pose[:3]
+    matrix[:3, :3] = quat2mat(pose[3:])
+    return matrix
+
+
+def _screw_coordinates(relative: np.ndarray) -> Optional[np.ndarray]:
+    """(6, 1): the twist (v, omega) times its angle that takes a pose to ``relative`` times it, as mplib's
+    ``plan_screw`` computes it (its ``pose2exp_coordinate``); None for a half turn, where mplib gives up."""
+    trace = relative[:3, :3].trace()
+    if np.isclose(trace, 3):
+        omega, theta = np.zeros(3), 1
+    elif np.isclose(trace, -1):
+        return None
+    else:
+        rotation = relative[:3, :3]
+        theta = np.arccos((trace - 1) / 2)
+        omega = 1 / 2 / np.sin(theta) * np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]]).T
+    skew = np.array([[0, -omega[2], omega[1]], [omega[2], 0, -omega[0]], [-omega[1], omega[0], 0]])
+    inverse_left_jacobian = np.eye(3) / theta - 0.5 * skew + (1.0 / theta - 0.5 / np.tan(theta / 2)) * skew @ skew
+    return (np.concatenate([inverse_left_jacobian @ relative[:3, 3], omega]) * theta).reshape(-1, 1)
 
 
 def _ik_starts(planner) -> np.ndarray:

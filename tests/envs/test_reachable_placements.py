@@ -241,3 +241,36 @@ def test_an_arm_check_verdict_does_not_depend_on_what_its_planner_checked_before
         for i in order:
             seen[i].add(arm_reach._face_inserts(planner, *args, faces[i], *rest))
     assert all(len(answers) == 1 for answers in seen.values()), seen
+
+
+def test_the_arm_checks_screw_verdict_is_mplibs_plan_screw(monkeypatch, tmp_path):
+    """``arm_reach.screw_path_is_free`` is ``plan_screw``'s success without the path's timing: on every screw motion
+    the check asks about for two Multi-Peg pairs and a solar set (planned afresh, with a cache of their own), free and
+    blocked ones alike, it gives mplib's verdict."""
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    from mani_skill_space.envs import arm_reach
+    from mani_skill_space.envs.multi_peg_in_hole_assembly import module_positions, pair_arm_planning
+    from mani_skill_space.envs.solar_panel_assembly import reachable_solar_set
+
+    monkeypatch.setenv("MANI_SKILL_SPACE_CACHE", str(tmp_path))
+    verdicts = []
+    path_is_free = arm_reach.screw_path_is_free
+
+    def compared(planner, qpos, target_pose, qpos_step):
+        ours = path_is_free(planner, qpos, target_pose, qpos_step)
+        try:
+            theirs = planner.plan_screw(target_pose, qpos.copy(), qpos_step=qpos_step, time_step=0.05, use_point_cloud=True)["status"] == "Success"
+        except RuntimeError:  # mplib cannot time a path of (almost) zero length: it was free
+            theirs = True
+        verdicts.append((ours, theirs))
+        return ours
+
+    monkeypatch.setattr(arm_reach, "screw_path_is_free", compared)
+    rover = make_rover(cargo_bin=False)
+    positions = module_positions("procedural")
+    for seed in (400468823, 5):
+        reachable_peg_hole_pair(seed, 0.001, rover.frames["arm_mount"][:3, 3], positions[0], pair_arm_planning(rover, Panda.urdf_path, positions, 0))
+    reachable_solar_set(3, 0.001, rover, Panda.urdf_path)
+    assert all(ours == theirs for ours, theirs in verdicts)
+    assert {ours for ours, _ in verdicts} == {True, False}
