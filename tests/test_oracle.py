@@ -957,3 +957,19 @@ def test_grasps_near_one_that_missed_are_not_tried_again():
     assert not _near_any(next_tilt, [missed])  # the next tilt at the same grasp point is another grasp
     assert _near_any(wrist_turned(missed), [missed]) and _near_any(wrist_turned(near), [missed])  # the same grip, fingers swapped
     assert not _near_any(wrist_turned(farther), [missed])
+
+
+@pytest.mark.parametrize("other_top, held_size, lift", [(0.15, 0.03, 0.3), (0.2, 0.06, 0.2 + np.sqrt(3) * 0.06 + 0.05), (0.3, 0.12, 0.45)])
+def test_the_multi_peg_oracle_carries_a_peg_just_high_enough_over_the_others(monkeypatch, other_top, held_size, lift):
+    """The held peg (a cube of ``held_size``) can hang its bounding box's diagonal below the hand: the carry keeps that
+    plus ``LIFT_CLEARANCE`` above the other pegs' highest point, no lower than Peg-in-Hole's 0.3 m and no higher than
+    the 0.45 m the dataset's long pegs needed."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles import peg_in_hole
+
+    cube = np.array([[x, y, z] for x in (0, held_size) for y in (0, held_size) for z in (0, held_size)])
+    heights = {"held": 0.02, "standing": other_top, "lying": 0.03}
+    monkeypatch.setattr(peg_in_hole, "collision_vertices", lambda peg: np.array([[0.0, 0.0, 0.0], [0.0, 0.0, heights[peg]]]))
+    env = SimpleNamespace(pegs=["lying", "held", "standing"], peg_assets=[None, [SimpleNamespace(collision_vertices=cube)], None])
+    assert peg_in_hole.MultiPegInHoleOracle._lift_height(env, 1) == pytest.approx(lift)

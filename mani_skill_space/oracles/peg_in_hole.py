@@ -6,12 +6,14 @@ while it lowers the peg in). MultiPegInHoleAssembly-v1: the same insertion four 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Iterator
 
 import numpy as np
 
-from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, surface_points
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, collision_vertices, surface_points
 from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
+from mani_skill_space.oracles.solar_panel import FREE_SPACE_ACCELERATION
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES
 
@@ -45,10 +47,20 @@ class PegInHoleOracle(Oracle):
 MULTI_INSERTION_ORDER = (0, 3, 1, 2)
 """Holes in the order they are filled: the outer ones first, so that the arm carrying a peg over an inner module
 has the standing pegs beside it, not in the way of its elbow."""
-MULTI_PEG_INSERTION = InsertionSettings(lift_height=SOLAR_PEG_LIFT_HEIGHT, relax_steps=6)
-"""Peg-in-Hole's insertion, but the peg is swung over the modules high enough for a long peg hanging from the
-hand to clear the pegs already standing (as in Solar Panel Assembly), and the push eases off before the peg is
-let go (in orbit a peg let go while pressed in springs back out)."""
+MULTI_PEG_INSERTION = InsertionSettings(
+    lift_height=SOLAR_PEG_LIFT_HEIGHT, relax_steps=6, insert_step=0.004, refine_passes=1, pre_grasp_acceleration=FREE_SPACE_ACCELERATION
+)
+"""Peg-in-Hole's insertion at Solar Panel Assembly's pace (``oracles.solar_panel.PEG_INSERTION``: 4 mm push steps,
+one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at twice the accelerations; at
+Peg-in-Hole's, 16 of the 28 procedural failures on the tuning seeds ran out of time), the push easing off before the
+peg is let go (in orbit a peg let go while pressed in springs back out). The peg is carried over the modules at
+``MultiPegInHoleOracle._lift_height``, at most this ``lift_height``: high enough for the dataset's 0.2 m peg
+hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly)."""
+
+
+LIFT_CLEARANCE = 0.05
+"""How far (m) a carried peg's lowest possible point stays above the other pegs' tops (the planner does not see the
+peg in the hand)."""
 
 
 class MultiPegInHoleOracle(Oracle):
@@ -73,12 +85,23 @@ class MultiPegInHoleOracle(Oracle):
         for done, hole in enumerate(MULTI_INSERTION_ORDER):
             standing = MULTI_INSERTION_ORDER[:done]
             self.make_solver(env, obstacles=self._obstacles(env, modules, hole, standing))
-            yield from PegInserter(self, MULTI_PEG_INSERTION, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
+            settings = replace(MULTI_PEG_INSERTION, lift_height=self._lift_height(env, hole))
+            yield from PegInserter(self, settings, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
             yield from self.open_gently(8)
             yield from self.retreat_up(RETREAT_DISTANCES)
             if not stayed_in(env, hole):
                 raise PlanningFailed(f"peg {hole} did not stay in its hole")
         yield from self.wait_for_success(20)
+
+    @staticmethod
+    def _lift_height(env, hole: int) -> float:
+        """The TCP's height (world z) for carrying peg ``hole`` over the modules: ``LIFT_CLEARANCE`` above the other
+        pegs' highest point, plus the held peg's bounding-box diagonal (the farthest it can hang below the hand), within
+        Peg-in-Hole's 0.3 m and ``MULTI_PEG_INSERTION``'s 0.45 m (enough for the dataset's 0.2 m peg)."""
+        tops = max(float(collision_vertices(peg)[:, 2].max()) for i, peg in enumerate(env.pegs) if i != hole)
+        held = env.peg_assets[hole][0].collision_vertices
+        hanging = float(np.linalg.norm(held.max(axis=0) - held.min(axis=0)))
+        return float(np.clip(tops + hanging + LIFT_CLEARANCE, InsertionSettings.lift_height, MULTI_PEG_INSERTION.lift_height))
 
     @staticmethod
     def _obstacles(env, modules: list, hole: int, standing: tuple) -> np.ndarray:
