@@ -181,7 +181,8 @@ def screw_path_is_free(planner, qpos: np.ndarray, target_pose: np.ndarray, qpos_
     0.1), without the path's time parameterisation: the same steps along the screw from ``qpos`` to
     ``target_pose`` ([x, y, z, qw, qx, qy, qz], the planner's world frame), each checked against the joint limits
     and the obstacles, but no TOPP-RA (a third of ``plan_screw``'s time, and it cannot fail a path mplib found
-    free). A solvability check needs only the verdict; ``tests/test_arm_reach.py`` checks that it is mplib's."""
+    free). A solvability check needs only the verdict; ``tests/envs/test_reachable_placements.py`` checks that it is
+    mplib's."""
     planner.planning_world.set_use_point_cloud(True)
     planner.planning_world.set_use_attach(False)
     qpos = planner.pad_qpos(np.array(qpos, dtype=np.float64))
@@ -235,7 +236,7 @@ def _screw_coordinates(relative: np.ndarray) -> Optional[np.ndarray]:
     else:
         rotation = relative[:3, :3]
         theta = np.arccos((trace - 1) / 2)
-        omega = 1 / 2 / np.sin(theta) * np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]]).T
+        omega = 1 / 2 / np.sin(theta) * np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]])
     skew = np.array([[0, -omega[2], omega[1]], [omega[2], 0, -omega[0]], [-omega[1], omega[0], 0]])
     inverse_left_jacobian = np.eye(3) / theta - 0.5 * skew + (1.0 / theta - 0.5 / np.tan(theta / 2)) * skew @ skew
     return (np.concatenate([inverse_left_jacobian @ relative[:3, 3], omega]) * theta).reshape(-1, 1)
