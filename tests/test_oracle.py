@@ -973,3 +973,62 @@ def test_the_multi_peg_oracle_carries_a_peg_just_high_enough_over_the_others(mon
     monkeypatch.setattr(peg_in_hole, "collision_vertices", lambda peg: np.array([[0.0, 0.0, 0.0], [0.0, 0.0, heights[peg]]]))
     env = SimpleNamespace(pegs=["lying", "held", "standing"], peg_assets=[None, [SimpleNamespace(collision_vertices=cube)], None])
     assert peg_in_hole.MultiPegInHoleOracle._lift_height(env, 1) == pytest.approx(lift)
+
+
+@pytest.mark.parametrize(
+    "standing, unplannable, chosen",
+    [((), (), 0), ((), (0,), 3), ((0,), (3,), 1), ((0,), (3, 1), 2), ((0, 1), (3,), 2), ((0, 3, 1), (), 2)],
+)
+def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monkeypatch, standing, unplannable, chosen):
+    """The pegs go in ``MULTI_INSERTION_ORDER``, but a peg whose insertion cannot start now (no grasp: a neighbour lies
+    under the hand) waits until the others are in; its first action comes with the insertion chosen."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles import peg_in_hole
+    from mani_skill_space.oracles.base import PlanningFailed
+
+    class FakeInserter:
+        def __init__(self, oracle, settings, reach_obstacles):
+            pass
+
+        def insert(self, target):
+            if target in unplannable:
+                raise PlanningFailed(f"no grasp of peg {target}")
+            yield ("first action of", target)
+            yield ("second action of", target)
+
+    monkeypatch.setattr(peg_in_hole, "PegInserter", FakeInserter)
+    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    solvers = []
+    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
+    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing: (hole, standing))
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole: 0.3)
+    env = SimpleNamespace(pegs=[None] * 4)
+    hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, None, list(standing))
+    assert hole == chosen and list(insertion) == [("first action of", chosen), ("second action of", chosen)]
+    assert solvers[-1] == (chosen, tuple(standing))  # the planner of the peg chosen, with the pegs standing as obstacles
+
+
+def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(monkeypatch):
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles import peg_in_hole
+    from mani_skill_space.oracles.base import PlanningFailed
+
+    class NeverStarts:
+        def __init__(self, oracle, settings, reach_obstacles):
+            pass
+
+        def insert(self, target):
+            raise PlanningFailed(f"no grasp of peg {target}")
+            yield
+
+    monkeypatch.setattr(peg_in_hole, "PegInserter", NeverStarts)
+    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: None)
+    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing: None)
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole: 0.3)
+    with pytest.raises(PlanningFailed, match="no grasp of peg 3"):
+        oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0])

@@ -44,6 +44,9 @@ class ArmPlanning:
     urdf_path: str
     rest_xy: tuple[float, float]
     extra_obstacles: Optional[np.ndarray] = None
+    rest_spread: Optional[tuple[float, float, float]] = None
+    """How far (m, m, rad) the episodes lay the peg from ``rest_xy`` and its heading (along x, along y, about z); the
+    grasp that passes must be reachable at each corner of that range too (``faces_the_arm_inserts``)."""
 
 
 def module_obstacles(hole: Asset, module: np.ndarray, peg_radius: float) -> np.ndarray:
@@ -56,7 +59,14 @@ def module_obstacles(hole: Asset, module: np.ndarray, peg_radius: float) -> np.n
 
 
 def face_checks_with_the_arm(
-    peg: Asset, hole_bottom: np.ndarray, depth: float, rest_xy, mount: Asset, urdf_path: str, extra_obstacles: Optional[np.ndarray] = None
+    peg: Asset,
+    hole_bottom: np.ndarray,
+    depth: float,
+    rest_xy,
+    mount: Asset,
+    urdf_path: str,
+    extra_obstacles: Optional[np.ndarray] = None,
+    rest_spread: Optional[tuple[float, float, float]] = None,
 ) -> dict[str, torch.Tensor]:
     """Each solvability check's verdict (faces,) on every resting face of one peg: ``envs.insertion.face_checks_of``
     (``reachable``, ``grippable``) for an arm at ``mount``'s ``arm_mount``, and ``arm_inserts``
@@ -68,7 +78,7 @@ def face_checks_with_the_arm(
     arm = np.zeros_like(candidates)
     if candidates.any():
         faces = placement.rotations().double().numpy()[candidates]
-        arm[candidates] = faces_the_arm_inserts(peg, faces, rest_xy, hole_bottom, depth, urdf_path, mount, extra_obstacles)
+        arm[candidates] = faces_the_arm_inserts(peg, faces, rest_xy, hole_bottom, depth, urdf_path, mount, extra_obstacles, rest_spread)
     checks["arm_inserts"] = torch.as_tensor(arm)
     checks["insertable"] = checks["insertable"] & checks["arm_inserts"]
     return checks
@@ -83,14 +93,22 @@ def faces_the_arm_inserts(
     urdf_path: str,
     mount: Asset,
     extra_obstacles: Optional[np.ndarray] = None,
+    rest_spread: Optional[tuple[float, float, float]] = None,
 ) -> np.ndarray:
     """(F,) bool: which of the peg's resting ``faces`` (F, 3, 3: peg to world, lying on each) let the arm insert it
     (see the module), the peg lying at ``rest_xy`` (world) with its tip toward the arm, its socket's bottom frame
     ``hole_bottom`` (world, 4 x 4, z out of the socket) ``depth`` deep, for the arm described by ``urdf_path`` on
     ``mount`` (at its ``arm_mount`` frame), with ``extra_obstacles`` (world points) besides the mount and the
-    ground. The verdicts are cached on disk (``procgen.cache``): planning takes tens of milliseconds a face."""
+    ground. Given ``rest_spread`` (m, m, rad: how far the episodes lay the peg from ``rest_xy`` along x and y, and
+    turn it from pointing straight away), the grasp must also be reachable with the peg lying at each corner of that
+    range: a grasp that only reaches the peg where it lies on average leaves the episodes that lay it elsewhere
+    unsolvable (Multi-Peg-in-Hole, tuning seed 62006: the only grasp whose push works could not be reached with the
+    peg 2 cm off its lane). The verdicts are cached on disk (``procgen.cache``): planning takes tens of milliseconds
+    a face."""
     obstacles = planning_obstacle_points(mount, extra_obstacles)
     inputs = [np.asarray(a, dtype=np.float64) for a in (peg.collision_vertices, peg.frames["end_0"], faces, rest_xy, hole_bottom, [depth, peg.info["height"], peg.info["symmetry_order"]])]
+    if rest_spread is not None:
+        inputs.append(np.asarray(rest_spread, dtype=np.float64))
     key = content_key(CHECK_VERSION, _description_key(urdf_path), obstacles.tobytes(), mount.frames["arm_mount"].tobytes(), *(a.tobytes() for a in inputs))
 
     def build() -> dict[str, np.ndarray]:
@@ -99,40 +117,66 @@ def faces_the_arm_inserts(
         planner = _planner_for(urdf_path, obstacles.tobytes())
         to_base = np.linalg.inv(mount.frames["arm_mount"])
         twists = _twists(int(peg.info["symmetry_order"]))
-        verdicts = [_face_inserts(planner, to_base, peg, rest, rest_xy, hole_bottom, depth, twists) for rest in faces]
+        verdicts = [_face_inserts(planner, to_base, peg, rest, rest_xy, hole_bottom, depth, twists, rest_spread) for rest in faces]
         return {"inserts": np.array(verdicts, dtype=bool)}
 
     return ArrayCache("arm_reach").get_or_create(key, build)["inserts"]
 
 
-def _face_inserts(planner, to_base, peg: Asset, rest: np.ndarray, rest_xy, hole_bottom, depth: float, twists: np.ndarray) -> bool:
+def _face_inserts(
+    planner, to_base, peg: Asset, rest: np.ndarray, rest_xy, hole_bottom, depth: float, twists: np.ndarray, rest_spread: Optional[tuple[float, float, float]] = None
+) -> bool:
     """The oracles' grasp (``oracles.insertion``: finger pads clear of the socket, at the peg's middle if that is
-    farther from the tip, clear of its head) and approach (the tip ``APPROACH_GAP`` over the socket's entrance)."""
+    farther from the tip, clear of its head) and approach (the tip ``APPROACH_GAP`` over the socket's entrance); the
+    grasp reachable at every corner of ``rest_spread`` too, where given (the push does not depend on where the peg
+    lay: the hand holds it the same way)."""
     from mani_skill_space.oracles.insertion import APPROACH_GAP, FINGER_MARGIN, HEAD_OVERHANG, PAD_REACH, _along_axis
 
     tip = _lying_tip(peg, rest, rest_xy)
+    elsewhere = [_lying_tip(peg, rest, (rest_xy[0] + dx, rest_xy[1] + dy), heading) for dx, dy, heading in _corners(rest_spread)]
     height = float(peg.info["height"])
     reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
+
+    def reachable(lying_tip: np.ndarray, tilt: float, wrist: float) -> bool:
+        return _ik(planner, to_base @ _along_axis(_top_grasp(lying_tip, tilt, reach), wrist, 0.0)) is not None
+
     for tilt in CHECK_TILTS:
         for wrist in (0.0, np.pi):
-            grasp = _along_axis(_top_grasp(tip, tilt, reach), wrist, 0.0)
-            if _ik(planner, to_base @ grasp) is None:
+            if not reachable(tip, tilt, wrist):
                 continue
+            grasp = _along_axis(_top_grasp(tip, tilt, reach), wrist, 0.0)
             hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
-            for twist in twists:
-                pressed = to_base @ _along_axis(hole_bottom, twist, 0.0) @ hand_from_tip
-                for over in _ik_solutions(planner, to_base @ _along_axis(hole_bottom, twist, depth + APPROACH_GAP) @ hand_from_tip):
-                    if _screw_reaches(planner, over, pressed):
-                        return True
+            if _pushes_in(planner, to_base, hand_from_tip, hole_bottom, depth + APPROACH_GAP, twists) and all(reachable(other, tilt, wrist) for other in elsewhere):
+                return True
     return False
 
 
-def _lying_tip(peg: Asset, rest: np.ndarray, rest_xy) -> np.ndarray:
+def _pushes_in(planner, to_base, hand_from_tip: np.ndarray, hole_bottom: np.ndarray, approach_height: float, twists: np.ndarray) -> bool:
+    """Whether, at some twist, the hand holding the tip (``hand_from_tip``) ``approach_height`` over the socket's
+    bottom on its axis can push it straight to the bottom."""
+    from mani_skill_space.oracles.insertion import _along_axis
+
+    for twist in twists:
+        pressed = to_base @ _along_axis(hole_bottom, twist, 0.0) @ hand_from_tip
+        for over in _ik_solutions(planner, to_base @ _along_axis(hole_bottom, twist, approach_height) @ hand_from_tip):
+            if _screw_reaches(planner, over, pressed):
+                return True
+    return False
+
+
+def _corners(rest_spread: Optional[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+    """The corners (dx, dy, heading) of the range ``rest_spread`` (half-widths), or none."""
+    if rest_spread is None:
+        return []
+    return [(sx * rest_spread[0], sy * rest_spread[1], sh * rest_spread[2]) for sx in (-1, 1) for sy in (-1, 1) for sh in (-1, 1)]
+
+
+def _lying_tip(peg: Asset, rest: np.ndarray, rest_xy, heading: float = 0.0) -> np.ndarray:
     """The insertable end's world frame with the peg lying on ``rest`` at ``rest_xy``, its axis (tip to head) turned
-    to point away from the arm (+x), its lowest point on the ground."""
+    to point away from the arm (+x), then by ``heading`` about z, its lowest point on the ground."""
     tip_in_peg = peg.frames["end_0"]
     axis = rest @ tip_in_peg[:3, 2]
-    lying = _rotation_z(torch.tensor(-np.arctan2(axis[1], axis[0]), dtype=torch.float64)).numpy() @ rest
+    lying = _rotation_z(torch.tensor(heading - np.arctan2(axis[1], axis[0]), dtype=torch.float64)).numpy() @ rest
     tip = np.eye(4)
     tip[:3, :3] = lying @ tip_in_peg[:3, :3]
     tip[:3, 3] = lying @ tip_in_peg[:3, 3] + [rest_xy[0], rest_xy[1], -(peg.collision_vertices @ lying.T)[:, 2].min()]

@@ -14,6 +14,7 @@ from mani_skill_space.envs.building import build_actor_per_env
 from mani_skill_space.envs.insertion import (
     INSERTION_VALUE,
     PEG_DROP_CLEARANCE,
+    PEG_HEADING_JITTER,
     PegInsertion,
     allow_insertable_faces,
     insertion_inputs,
@@ -60,7 +61,8 @@ def pair_arm_planning(mount: Asset, urdf_path: str, positions: np.ndarray, index
     hand holding a peg over a tilted hole reaches sideways over the module beside it (modules 2 cm apart, the hand
     20 cm wide): traced on seed 62008, the oracle found no push into the outer hole that missed the next module's top."""
     x = float(positions[index][0]) - float(np.mean(PEG_DISTANCE))
-    return ArmPlanning(mount, urdf_path, (x, PEG_LANE_YS[index]), _module_block_points(tuple(map(tuple, positions)), index))
+    spread = ((PEG_DISTANCE[1] - PEG_DISTANCE[0]) / 2, PEG_LATERAL, PEG_HEADING_JITTER)
+    return ArmPlanning(mount, urdf_path, (x, PEG_LANE_YS[index]), _module_block_points(tuple(map(tuple, positions)), index), spread)
 
 
 @functools.lru_cache(maxsize=8)

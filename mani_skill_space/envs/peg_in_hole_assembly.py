@@ -81,7 +81,7 @@ def reachable_peg_hole_pair(
             obstacles = module_obstacles(hole, module, float(peg.info["radius"]))
             if arm.extra_obstacles is not None:
                 obstacles = np.concatenate([arm.extra_obstacles, obstacles])
-            checks = face_checks_with_the_arm(peg, bottom, hole.info["depth"], arm.rest_xy, arm.mount, arm.urdf_path, obstacles)
+            checks = face_checks_with_the_arm(peg, bottom, hole.info["depth"], arm.rest_xy, arm.mount, arm.urdf_path, obstacles, arm.rest_spread)
         if bool(checks["insertable"].any()):
             hole.info["feasibility"] = feasibility_record(draw + 1, [checks])
             if arm is not None:

@@ -274,3 +274,38 @@ def test_the_arm_checks_screw_verdict_is_mplibs_plan_screw(monkeypatch, tmp_path
     reachable_solar_set(3, 0.001, rover, Panda.urdf_path)
     assert all(ours == theirs for ours, theirs in verdicts)
     assert {ours for ours, _ in verdicts} == {True, False}
+
+
+def test_the_multi_peg_arm_check_asks_for_a_grasp_that_reaches_the_peg_wherever_the_episode_lays_it():
+    """Tuning seed 62006's third pair on the Moon (asset seed 1987303709, second draw: a 42 mm peg, its hole tilted 20
+    degrees): only a grasp tilted 45 degrees pushes it in, and the arm reaches that grasp with the peg in the middle of
+    its lane but not 2 cm off it, where the episode laid it (traced: the oracle found no grasp that lines it up and
+    pushes it in). Checked only where the peg lies on average, both its sides pass; checked at the corners of the range
+    the episodes lay it in (``pair_arm_planning``'s ``rest_spread``), neither does, and the pair is drawn again."""
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    from mani_skill_space.envs.arm_reach import face_checks_with_the_arm, module_obstacles
+    from mani_skill_space.envs.multi_peg_in_hole_assembly import module_positions, pair_arm_planning
+    from mani_skill_space.envs.insertion import redrawn_seed
+
+    rover = make_rover(cargo_bin=False)
+    positions = module_positions("procedural")
+    arm = pair_arm_planning(rover, Panda.urdf_path, positions, 2)
+    peg, hole = make_peg_hole_pair(redrawn_seed(1987303709, 1), 0.001)
+    module = np.eye(4)
+    module[:3, 3] = positions[2]
+    obstacles = np.concatenate([arm.extra_obstacles, module_obstacles(hole, module, float(peg.info["radius"]))])
+    where = (peg, module @ hole.frames["bottom"], hole.info["depth"], arm.rest_xy, rover, Panda.urdf_path, obstacles)
+    on_average = face_checks_with_the_arm(*where)["insertable"]
+    everywhere = face_checks_with_the_arm(*where, arm.rest_spread)["insertable"]
+    assert int(on_average.sum()) == 2 and not bool(everywhere.any())
+    _, drawn = reachable_peg_hole_pair(1987303709, 0.001, rover.frames["arm_mount"][:3, 3], positions[2], arm)
+    assert drawn.info["feasibility"]["draws"] == 3
+
+
+def test_the_corners_of_a_peg_placement_range():
+    from mani_skill_space.envs.arm_reach import _corners
+
+    corners = _corners((0.02, 0.01, 0.2))
+    assert len(set(corners)) == 8 and _corners(None) == []
+    assert {tuple(np.abs(c)) for c in corners} == {(0.02, 0.01, 0.2)}
