@@ -96,7 +96,8 @@ class MultiPegInHoleAssemblyEnv(SocketClearance, SpaceManipulationEnv):
       and the 22 x 22 mm socket on a 50 x 50 mm post; `asset_source="procedural"` gives Peg-in-Hole's procedural
       pairs (random profile, size, taper; hole at a random offset, tilt up to 20 deg and depth, `clearance`
       default 1 mm), each drawn again until the arm can insert it at its module (`reachable_peg_hole_pair`, with
-      the arm's own planning, `pair_arm_planning`: the push into the hole must miss the modules)
+      the arm's own planning, `pair_arm_planning`: the push into the hole must miss the modules, and the grasp must
+      be reachable wherever the episode may lay the peg)
     - the modules stand at x = 0.6 m (procedural; the dataset posts at 0.7 m, as in Peg-in-Hole), y = +-0.085 and
       +-0.255 m; each peg lies on a random stable side 0.24-0.28 m in front of its module, within +-2 cm of its
       centre line, its tip toward the arm within +-11 deg (for procedural pairs, only on a side from which the arm

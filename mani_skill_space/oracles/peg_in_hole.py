@@ -66,7 +66,8 @@ peg in the hand)."""
 
 class MultiPegInHoleOracle(Oracle):
     """Oracle for MultiPegInHoleAssembly-v1: Peg-in-Hole's insertion of each peg into its own hole in turn
-    (``MULTI_INSERTION_ORDER``), letting go of it and backing straight up before the next, with the modules and
+    (``MULTI_INSERTION_ORDER``, a peg whose insertion cannot start yet left for later:
+    ``_first_plannable_insertion``), letting go of it and backing straight up before the next, with the modules and
     the other pegs (those standing with a margin) as the planner's obstacles."""
 
     screw_step = FINE_SCREW_STEP
