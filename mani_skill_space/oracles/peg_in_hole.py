@@ -99,7 +99,7 @@ class MultiPegInHoleOracle(Oracle):
         """The next peg to insert and its insertion (actions), its first action already planned: the first peg not yet
         ``standing``, in ``MULTI_INSERTION_ORDER``, whose insertion can start from where the arm and the pegs are now.
         A peg lying beside another can be out of reach until that one is gone: on the tuning seeds, the hand tilted
-        over an outer peg came down on the inner peg lying 8-12 cm beside it (the Panda's hand is 20 cm across). Where
+        over an outer peg came down on the inner peg lying 9 cm beside it (the Panda's hand is 20 cm across). Where
         no peg's insertion can start, the first one's failure is raised."""
         failures = []
         for hole in (hole for hole in MULTI_INSERTION_ORDER if hole not in standing):
