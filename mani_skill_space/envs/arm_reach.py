@@ -146,7 +146,8 @@ def _face_inserts(
                 continue
             grasp = _along_axis(_top_grasp(tip, tilt, reach), wrist, 0.0)
             hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
-            if _pushes_in(planner, to_base, hand_from_tip, hole_bottom, depth + APPROACH_GAP, twists) and all(reachable(other, tilt, wrist) for other in elsewhere):
+            # the corners first: on 100 multi-peg pairs they cost less than the pushes and fail more often
+            if all(reachable(other, tilt, wrist) for other in elsewhere) and _pushes_in(planner, to_base, hand_from_tip, hole_bottom, depth + APPROACH_GAP, twists):
                 return True
     return False
 
