@@ -137,14 +137,17 @@ def _face_inserts(
     height = float(peg.info["height"])
     reach = min(max(depth + PAD_REACH + FINGER_MARGIN, height / 2), height - HEAD_OVERHANG)
 
+    def grasp_at(lying_tip: np.ndarray, tilt: float, wrist: float) -> np.ndarray:
+        return _along_axis(_top_grasp(lying_tip, tilt, reach), wrist, 0.0)
+
     def reachable(lying_tip: np.ndarray, tilt: float, wrist: float) -> bool:
-        return _ik(planner, to_base @ _along_axis(_top_grasp(lying_tip, tilt, reach), wrist, 0.0)) is not None
+        return _ik(planner, to_base @ grasp_at(lying_tip, tilt, wrist)) is not None
 
     for tilt in CHECK_TILTS:
         for wrist in (0.0, np.pi):
-            if not reachable(tip, tilt, wrist):
+            grasp = grasp_at(tip, tilt, wrist)
+            if _ik(planner, to_base @ grasp) is None:
                 continue
-            grasp = _along_axis(_top_grasp(tip, tilt, reach), wrist, 0.0)
             hand_from_tip = np.linalg.inv(np.linalg.inv(grasp) @ tip)
             # the corners first: on 100 multi-peg pairs they cost less than the pushes and fail more often
             if all(reachable(other, tilt, wrist) for other in elsewhere) and _pushes_in(planner, to_base, hand_from_tip, hole_bottom, depth + APPROACH_GAP, twists):
