@@ -1,6 +1,6 @@
 """The oracle solves a fixed handful of seeds in every domain and asset source (physx_cpu, deterministic)."""
 
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 import gymnasium as gym
 import numpy as np
@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import Oracle, _finger_box_corners, _trapezoid
+from mani_skill_space.oracles.base import Oracle, PlanningFailed, _finger_box_corners, _trapezoid
 from mani_skill_space.oracles.debris_capture import FAST_SWING
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
@@ -660,7 +660,6 @@ class _HandAtRest:
 def test_the_line_up_prefers_a_push_clear_of_the_joint_limits_then_the_first_feasible(inserter, margins, chosen):
     """``_line_up`` tries the twists nearest the planned one in each of its tiers (approach gap x push depth); the first
     whose push keeps PUSH_JOINT_MARGIN wins, else the first feasible one."""
-    from mani_skill_space.oracles.base import PlanningFailed
     from mani_skill_space.oracles.insertion import ENOUGH_DEPTH_LEFT, LINE_UP_GAPS, PRESS_DEPTH, PegInserter
 
     target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04, symmetry=4, end_frames=lambda: np.stack([np.eye(4)] * 2))
@@ -735,6 +734,62 @@ def test_without_a_screw_motion_the_hand_takes_its_line_else_the_quicker_of_arc_
         assert path is None
     else:
         assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
+
+
+class _RetreatsUp(Oracle):
+    """A stand-in oracle whose hand, at the origin, goes straight up (a screw motion or the TCP controller's line) at
+    most ``screw_up`` or ``line_up`` m (None: not at all), and anywhere by a joint move where ``joint``; its motions are
+    recorded (the height of their goal), not run."""
+
+    def __init__(self, screw_up=None, line_up=None, joint=True):
+        self.screw_up, self.line_up, self.joint, self.moved_to = screw_up, line_up, joint, []
+
+    def arm_qpos(self):
+        return np.zeros(7)
+
+    def tcp_pose(self):
+        return sapien.Pose()
+
+    def _speed(self, scale, acceleration_scale=1.0):
+        return nullcontext()
+
+    @staticmethod
+    def _up_to(limit, pose):
+        return None if limit is None or pose.p[2] > limit + 1e-9 else np.zeros((3, 7))
+
+    def _screw_path(self, start, pose):
+        return self._up_to(self.screw_up, pose)
+
+    def straight_line_path(self, start, pose, acceleration=1.0):
+        return self._up_to(self.line_up, pose)
+
+    def _path_without_screw(self, start, pose, acceleration=1.0):
+        line = self.straight_line_path(start, pose)
+        return line if line is not None or not self.joint else np.ones((9, 7))
+
+    def screw_to(self, pose, what, settle_steps=0, speed=1.0, acceleration=1.0):
+        self.moved_to.append((what, round(float(pose.p[2]), 3)))
+        yield np.zeros(8, dtype=np.float32)
+
+
+@pytest.mark.parametrize(
+    "screw_up, line_up, joint, height",
+    [
+        (0.3, None, True, 0.2),  # the whole way up, straight
+        (0.15, None, True, 0.12),  # as far as the hand goes straight, rather than a joint move the whole way
+        (None, 0.07, True, 0.06),  # the TCP controller's straight line counts as straight
+        (0.01, None, True, 0.2),  # nowhere straight: the first distance any motion reaches
+        (0.01, None, False, None),  # no motion at all
+    ],
+)
+def test_the_retreat_goes_straight_up_as_far_as_it_can_before_any_other_motion(screw_up, line_up, joint, height):
+    oracle = _RetreatsUp(screw_up, line_up, joint)
+    if height is None:
+        with pytest.raises(PlanningFailed, match="no motion to the retreat pose"):
+            list(oracle.retreat_up((0.2, 0.12, 0.06)))
+        return
+    list(oracle.retreat_up((0.2, 0.12, 0.06)))
+    assert oracle.moved_to == [("retreat", height)]
 
 
 class _LinesUnderTcpControl(Oracle):
@@ -827,7 +882,6 @@ class _ClosingFingers:
 
 
 def _steps_waited(env) -> tuple[int, bool]:
-    from mani_skill_space.oracles.base import PlanningFailed
 
     oracle = Oracle()
     oracle.env, oracle.gripper = env, -1.0
@@ -985,7 +1039,6 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
     from types import SimpleNamespace
 
     from mani_skill_space.oracles import peg_in_hole
-    from mani_skill_space.oracles.base import PlanningFailed
 
     class FakeInserter:
         def __init__(self, oracle, settings, reach_obstacles):
@@ -1014,7 +1067,6 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
     from types import SimpleNamespace
 
     from mani_skill_space.oracles import peg_in_hole
-    from mani_skill_space.oracles.base import PlanningFailed
 
     class NeverStarts:
         def __init__(self, oracle, settings, reach_obstacles):

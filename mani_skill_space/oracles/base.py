@@ -588,8 +588,19 @@ class Oracle(Policy):
         raise PlanningFailed(f"no motion to the {what} pose")
 
     def retreat_up(self, distances: tuple[float, ...]) -> Iterator[np.ndarray]:
-        """Straight up from where the hand is, as far of ``distances`` (longest first) as the arm can go."""
-        yield from self.first_reachable([raised(self.tcp_pose(), d) for d in distances], "retreat")
+        """Straight up from where the hand is, as far of ``distances`` (longest first) as the hand can go in a straight
+        line (``straight_motion_exists``); where it can go none of them so, the first the arm reaches by any motion.
+        The open fingers still straddle the part just let go, which the planner does not see: traced on Multi-Peg,
+        orbit, seed 62019, the hand had no straight motion 0.2 m up (a joint limit), and the joint-space move there
+        swung it 5 cm sideways and the fingers dragged the peg out of its hole, where 0.12 m straight up was free."""
+        start, poses = self.arm_qpos(), [raised(self.tcp_pose(), d) for d in distances]
+        straight = next((pose for pose in poses if self.straight_motion_exists(start, pose)), None)
+        yield from self.first_reachable(poses if straight is None else [straight], "retreat")
+
+    def straight_motion_exists(self, start: np.ndarray, pose: sapien.Pose) -> bool:
+        """Whether ``screw_to(pose)`` from ``start`` takes the hand in a straight line: mplib's screw motion, or the TCP
+        controller's line where the oracle moves in straight lines (``_motion_path`` takes the first of these there is)."""
+        return self._screw_path(start, pose) is not None or self.straight_line_path(start, pose) is not None
 
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8, closing_steps: int = 40) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
