@@ -741,6 +741,8 @@ class _RetreatsUp(Oracle):
     most ``screw_up`` or ``line_up`` m (None: not at all), and anywhere by a joint move where ``joint``; its motions are
     recorded (the height of their goal), not run."""
 
+    retreats_straight_up = True
+
     def __init__(self, screw_up=None, line_up=None, joint=True):
         self.screw_up, self.line_up, self.joint, self.moved_to = screw_up, line_up, joint, []
 
@@ -790,6 +792,15 @@ def test_the_retreat_goes_straight_up_as_far_as_it_can_before_any_other_motion(s
         return
     list(oracle.retreat_up((0.2, 0.12, 0.06)))
     assert oracle.moved_to == [("retreat", height)]
+
+
+def test_an_oracle_that_does_not_retreat_straight_takes_the_first_distance_any_motion_reaches():
+    oracle = _RetreatsUp(screw_up=0.15)
+    oracle.retreats_straight_up = False  # Solar Panel Assembly's
+    list(oracle.retreat_up((0.2, 0.12, 0.06)))
+    assert oracle.moved_to == [("retreat", 0.2)]
+    assert oracle_for("MultiPegInHoleAssembly-v1").retreats_straight_up
+    assert not oracle_for("SolarPanelAssembly-v1").retreats_straight_up
 
 
 class _LinesUnderTcpControl(Oracle):

@@ -119,6 +119,15 @@ class Oracle(Policy):
     holds) when it checks a motion for collisions. mplib's model otherwise keeps them closed, i.e. an open finger's
     outer side 4 cm farther out than planned: room enough to sweep through a thin peg standing beside the path."""
 
+    retreats_straight_up: bool = False
+    """Where set, ``retreat_up`` goes straight up as far as the hand can before it takes any other motion. The open
+    fingers still straddle the part just let go, which the planner does not see: traced on Multi-Peg, orbit, seed
+    62019, the hand had no straight motion 0.2 m up (a joint limit), and the joint-space move there swung it 5 cm
+    sideways, and the fingers dragged the peg out of its hole, where 0.12 m straight up was free. Solar Panel
+    Assembly's oracle does not: with it, the motions after its retreats found no plan more often (the panel's
+    pre-grasp, the next peg's grasp; its suite's seeds 4100-4119, every configuration: 144 -> 132 of 160, none gained;
+    not traced)."""
+
     _planned_fingers: Optional[np.ndarray] = None
     """The finger joints of ``fingers_planned_at``'s block, inside one."""
 
@@ -588,14 +597,13 @@ class Oracle(Policy):
         raise PlanningFailed(f"no motion to the {what} pose")
 
     def retreat_up(self, distances: tuple[float, ...]) -> Iterator[np.ndarray]:
-        """Straight up from where the hand is, as far of ``distances`` (longest first) as the hand can go in a straight
-        line (``straight_motion_exists``); where it can go none of them so, the first the arm reaches by any motion.
-        The open fingers still straddle the part just let go, which the planner does not see: traced on Multi-Peg,
-        orbit, seed 62019, the hand had no straight motion 0.2 m up (a joint limit), and the joint-space move there
-        swung it 5 cm sideways and the fingers dragged the peg out of its hole, where 0.12 m straight up was free."""
+        """Up from where the hand is, to the first of ``distances`` (longest first) the arm can move to; where the oracle
+        ``retreats_straight_up``, to the first it can reach in a straight line (``straight_motion_exists``) if any."""
         start, poses = self.arm_qpos(), [raised(self.tcp_pose(), d) for d in distances]
-        straight = next((pose for pose in poses if self.straight_motion_exists(start, pose)), None)
-        yield from self.first_reachable(poses if straight is None else [straight], "retreat")
+        if self.retreats_straight_up:
+            straight = next((pose for pose in poses if self.straight_motion_exists(start, pose)), None)
+            poses = poses if straight is None else [straight]
+        yield from self.first_reachable(poses, "retreat")
 
     def straight_motion_exists(self, start: np.ndarray, pose: sapien.Pose) -> bool:
         """Whether ``screw_to(pose)`` from ``start`` takes the hand in a straight line: mplib's screw motion, or the TCP

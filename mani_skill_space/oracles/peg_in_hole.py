@@ -73,6 +73,7 @@ class MultiPegInHoleOracle(Oracle):
     screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
     """Standing pegs are thin: a check at 20 points of a long swing can step over one."""
+    retreats_straight_up = True
     plans_with_the_fingers_as_they_are = True
     """The empty hand's motion to the next peg starts over the one just inserted: planned with closed fingers, the
     open ones swept through the tops of standing pegs (seeds 62003 and others: the left finger knocked a peg out)."""

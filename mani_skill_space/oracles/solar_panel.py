@@ -24,7 +24,7 @@ RETREAT_DISTANCE = 0.2
 approach would drag a long peg over), well clear of the pegs' tops before it moves sideways: the planner's
 point-cloud checks miss the open fingers brushing a thin peg's top."""
 RETREAT_DISTANCES = (RETREAT_DISTANCE, 0.12, 0.06)
-"""Where the arm cannot go the whole way up, it retreats as far as it can of these."""
+"""Where the arm cannot go the whole way up, it retreats as far as it can of these (``Oracle.retreat_up``)."""
 PEG_LIFT_HEIGHT = 0.45
 """The TCP's height while swinging a peg over its socket: a long peg hanging from the hand clears the pegs
 already standing (their tops at 0.28 m; the planner does not know about the peg in the hand)."""
