@@ -602,7 +602,10 @@ class Oracle(Policy):
         start, poses = self.arm_qpos(), [raised(self.tcp_pose(), d) for d in distances]
         if self.retreats_straight_up:
             straight = next((pose for pose in poses if self.straight_motion_exists(start, pose)), None)
-            poses = poses if straight is None else [straight]
+            if straight is not None:
+                # screw_to takes the straight motion found (``_motion_path`` tries those first): no need to plan it again
+                yield from self.screw_to(straight, "retreat")
+                return
         yield from self.first_reachable(poses, "retreat")
 
     def straight_motion_exists(self, start: np.ndarray, pose: sapien.Pose) -> bool:
