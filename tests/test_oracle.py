@@ -336,6 +336,23 @@ def test_the_fingers_of_a_planned_grasp_stay_clear_of_the_surface_round_the_hole
         assert inserter._fingers_clear_surface(target, hand, grip_half_width) is clears
 
 
+def test_the_last_resort_grasps_come_in_order_of_how_far_their_fingers_let_the_peg_in(inserter):
+    """When no checked grasp has a plan, the grasps are tried again unchecked: those whose fingers meet the peg's sides
+    first, then those whose fingers, with the peg at the bottom, stay highest above the surface round the hole first
+    (a grasp farther from the tip, whose fingers would not dig into the module round a tilted hole)."""
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)  # an upright hole, its entrance 4 cm up
+    flat = _prism(np.array([[-0.02, 0.0], [0.02, 0.0], [0.02, 0.005], [-0.02, 0.005]]))  # lying along x, tip at +x
+    tip = np.eye(4)
+    tip[:3, :3] = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # its axis (z) into the peg
+    tip[:3, 3] = [0.03, 0.0, 0.0025]
+    fingertip = inserter.finger_corners[:, 2].max()
+    near, far = (sapien.Pose([x, 0.0, fingertip - 0.001], [0.0, 1.0, 0.0, 0.0]) for x in (0.0, -0.02))
+    rolled = sapien.Pose([-0.025, 0.0, fingertip - 0.001], [0.0, 1.0, 0.0, 0.0]) * sapien.Pose(q=[np.cos(np.radians(12.5)), np.sin(np.radians(12.5)), 0.0, 0.0])
+    assert not inserter._fingers_meet_sides(rolled, flat) and inserter._fingers_meet_sides(near, flat)
+    order = inserter._last_resorts(target, tip, flat, [near, rolled, far])
+    assert [id(grasp) for grasp in order] == [id(far), id(near), id(rolled)]
+
+
 class _ArmsOverTheHole:
     """A stand-in oracle whose IK over the hole finds ``arms`` (each free to reach) and whose push from each keeps the
     given joint-limit margin (None: no straight push)."""

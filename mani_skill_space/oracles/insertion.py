@@ -591,8 +591,8 @@ class PegInserter:
         (those whose pads also press squarely on its sides, ``_pads_square_on_sides``, before the rest), then the
         others, those meeting more of the peg first; a grasp whose pads miss the peg altogether is never
         tried. Each comes with whether its fingers must be checked (``_fingers_meet_sides``,
-        ``_fingers_clear_surface``): the last resort, the first grasps again, is not (the checks are
-        conservative: a grasp that fails them may still get the peg 90% of the way in)."""
+        ``_fingers_clear_surface``): the last resort, all of them again in the order ``_last_resorts`` gives, is not
+        (the checks are conservative: a grasp that fails them may still get the peg 90% of the way in)."""
         rise = self._surface_rise(target)
         reaches = (0.0, rise) if rise > FINGER_MARGIN else (0.0,)
         candidates = []
@@ -601,15 +601,27 @@ class PegInserter:
                 for tilt in GRASP_TILTS:
                     grasp = self._grasp_pose(target, tip, tilt, roll, extra_reach)
                     for pose in self._wrist_turns(grasp):
-                        candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad), extra_reach == 0.0))
-        firm = [(pose, near) for pose, overlap, near in candidates if overlap >= FIRM_PAD_OVERLAP]
-        firm.sort(key=lambda candidate: not self._pads_square_on_sides(candidate[0], peg_points))  # stable: square first
-        weak = [(pose, near) for pose, overlap, near in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
-        for pose, _ in firm + weak:
+                        candidates.append((pose, pad_overlap(pose, peg_points, self.finger_pad)))
+        firm = [pose for pose, overlap in candidates if overlap >= FIRM_PAD_OVERLAP]
+        firm.sort(key=lambda pose: not self._pads_square_on_sides(pose, peg_points))  # stable: square first
+        weak = [pose for pose, overlap in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
+        for pose in firm + weak:
             yield pose, True
-        for pose, near in firm + weak:
-            if near:
-                yield pose, False
+        for pose in self._last_resorts(target, tip, peg_points, firm + weak):
+            yield pose, False
+
+    def _last_resorts(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray, grasps: list) -> list:
+        """``grasps`` again, unchecked: those whose fingers meet the peg's sides first, then those whose fingers come
+        nearest to clearing the surface round the hole with the peg at the bottom (at their best twist) first. Taken in
+        the grasps' own order, the first last resort's finger met the module round a tilted hole and stopped the peg 78%
+        of the way in, on every push (Multi-Peg, orbit, seed 62005: the fingers 5 mm below that surface as planned)."""
+
+        def clearance(grasp: sapien.Pose) -> float:
+            tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
+            grip_half_width = np.abs(_across_fingers(grasp, peg_points)).max()
+            return max(self._surface_clearance(target, _along_axis(target.bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand), grip_half_width) for twist in _twists(target.symmetry))
+
+        return sorted(grasps, key=lambda grasp: (not self._fingers_meet_sides(grasp, peg_points), -clearance(grasp)))
 
     def _wrist_turns(self, grasp: sapien.Pose) -> tuple[sapien.Pose, sapien.Pose]:
         """``grasp`` and the same grip with the hand turned half a turn about its approach; where the oracle moves in
@@ -632,13 +644,17 @@ class PegInserter:
         """Whether the fingers, closed on the peg (``grip_half_width`` either side of the TCP, across the closing
         axis) by a hand at ``hand_pressed`` (the peg at the hole's bottom), stay above the level surface round the
         hole's entrance."""
+        return bool(self._surface_clearance(target, hand_pressed, grip_half_width) >= SURFACE_CLEARANCE)
+
+    def _surface_clearance(self, target: PegTarget, hand_pressed: np.ndarray, grip_half_width: float) -> float:
+        """How far (m) the fingers closed on the peg by a hand at ``hand_pressed`` stay above the level surface round
+        the hole's entrance (negative: below it)."""
         corners = self.finger_corners.copy()
         inner = np.abs(corners[:, 1]).min()  # the open fingers' inner faces, across the closing (y) axis
         corners[:, 1] -= np.sign(corners[:, 1]) * max(0.0, inner - grip_half_width)
         lowest = (corners @ hand_pressed[:3, :3].T + hand_pressed[:3, 3])[:, 2].min()
         bottom = target.bottom
-        entrance_height = bottom[2, 3] + target.depth * bottom[2, 2]
-        return bool(lowest >= entrance_height + SURFACE_CLEARANCE)
+        return float(lowest - (bottom[2, 3] + target.depth * bottom[2, 2]))
 
     def _grasp_pose(self, target: PegTarget, tip: np.ndarray, tilt: float, roll: float = 0.0, extra_reach: float = 0.0) -> sapien.Pose:
         """Hand pose taking the lying peg from above, tilted by ``tilt`` toward its tip and rolled by ``roll``
