@@ -18,6 +18,7 @@ The geometry comes from the env's public ``PegInsertion`` frames (``mani_skill_s
 
 from __future__ import annotations
 
+import itertools
 from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any, Callable, Generator, Iterable, Iterator, Optional, Sequence
@@ -334,14 +335,15 @@ class PegInserter:
         outward /= np.linalg.norm(outward)
         start = self.oracle.arm_qpos()
         peg_points = collision_vertices(target.peg)
-        candidates = [(pose, checked) for pose, checked in self._grasp_candidates(target, tip, peg_points) if not _near_any(_in_frame_of(target.peg, pose), missed)]
+        grasps = [pose for pose in self._grasp_candidates(target, tip, peg_points) if not _near_any(_in_frame_of(target.peg, pose), missed)]
         # all the checked grasps together (those lifting the peg straight up first, then the others), then each
-        # unchecked last resort on its own
-        checked = [c for c in candidates if c[1]]
-        groups = [(checked, True, False), (checked, False, False)] + [([c], None, False) for c in candidates if not c[1]]
+        # unchecked last resort on its own, ordered only if they are reached (they seldom are)
+        checked = [(pose, True) for pose in grasps]
+        groups: Iterable[tuple[list, Optional[bool], bool]] = [(checked, True, False), (checked, False, False)]
         if getattr(self.oracle, "moves_in_straight_lines", False):  # the checked grasps with straight swings first
             groups = [(checked, True, True), (checked, False, True)] + groups
-        for group, straight_lift, straight_swing in groups:
+        last_resorts = (([(pose, False)], None, False) for pose in self._last_resorts(target, tip, peg_points, grasps))
+        for group, straight_lift, straight_swing in itertools.chain(groups, last_resorts):
             if self._takes_the_quickest_plan:
                 plan = self._quickest_plan(target, tip, start, outward, peg_points, group, straight_lift, self.push_joint_margin)
             else:
@@ -407,7 +409,7 @@ class PegInserter:
         (the hand pointing down and away from the arm first), the plans (swing over the hole, grasp, twist, the arm
         after the lift) for which the whole insertion is feasible from ``start`` (only those whose lift is, or with
         False is not, a straight screw motion up, as ``straight_lift`` says), each with its push's joint-limit margin."""
-        bottom, depth = target.bottom, target.depth
+        depth = target.depth
         for grasp, checked in candidates:
             if checked and not self._fingers_meet_sides(grasp, peg_points):
                 continue
@@ -415,14 +417,14 @@ class PegInserter:
                 lifted = self._grasp_and_lift_end(start, grasp, straight_lift)
             if lifted is None:
                 continue
-            tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
-            grip_half_width = np.abs(_across_fingers(grasp, peg_points)).max()
-            hand_over_hole = lambda twist: _along_axis(bottom, twist, depth) @ np.linalg.inv(tip_in_hand)  # noqa: E731
+            tip_in_hand = _tip_in_hand(grasp, tip)
+            grip_half_width = _grip_half_width(grasp, peg_points)
+            hand_over_hole = lambda twist: _hand_matrix_over_hole(target, twist, tip_in_hand, depth)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             holding = np.full_like(self.oracle.finger_qpos(), grip_half_width)  # each finger closed on the peg
             for twist in sorted(_twists(target.symmetry), key=score):
-                pressed = _along_axis(bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand)
+                pressed = _hand_matrix_over_hole(target, twist, tip_in_hand, 0.0)
                 if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
                 with self._reaching(), self.oracle.fingers_planned_at(holding):
@@ -552,7 +554,7 @@ class PegInserter:
     @staticmethod
     def _hand_over_hole(target: PegTarget, twist, tip_in_hand, height: float) -> sapien.Pose:
         """The hand pose holding the tip (``tip_in_hand``) ``height`` above the hole's bottom on its axis, at ``twist``."""
-        return sapien.Pose(_along_axis(target.bottom, twist, height) @ np.linalg.inv(tip_in_hand))
+        return sapien.Pose(_hand_matrix_over_hole(target, twist, tip_in_hand, height))
 
     def _insertion_arm(
         self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
@@ -583,16 +585,17 @@ class PegInserter:
                     best = (arm, margin)
         return best
 
-    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> Iterator[tuple[sapien.Pose, bool]]:
+    def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> list[sapien.Pose]:
         """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp
         tilt, then the hand rolled about the peg's axis, each also turned a half turn about its approach (the same
         grip, another wrist angle); then all of these again farther from the tip, where the hole is tilted (see
         ``_surface_rise``). Those whose pads meet the peg firmly (``FIRM_PAD_OVERLAP``) come first, in that order
         (those whose pads also press squarely on its sides, ``_pads_square_on_sides``, before the rest), then the
         others, those meeting more of the peg first; a grasp whose pads miss the peg altogether is never
-        tried. Each comes with whether its fingers must be checked (``_fingers_meet_sides``,
-        ``_fingers_clear_surface``): the last resort, all of them again in the order ``_last_resorts`` gives, is not
-        (the checks are conservative: a grasp that fails them may still get the peg 90% of the way in)."""
+        tried. ``_plan_grasp`` tries them with their fingers checked (``_fingers_meet_sides``,
+        ``_fingers_clear_surface``), then, as the last resort, all of them again unchecked in the order
+        ``_last_resorts`` gives (the checks are conservative: a grasp that fails them may still get the peg 90% of
+        the way in)."""
         rise = self._surface_rise(target)
         reaches = (0.0, rise) if rise > FINGER_MARGIN else (0.0,)
         candidates = []
@@ -605,10 +608,7 @@ class PegInserter:
         firm = [pose for pose, overlap in candidates if overlap >= FIRM_PAD_OVERLAP]
         firm.sort(key=lambda pose: not self._pads_square_on_sides(pose, peg_points))  # stable: square first
         weak = [pose for pose, overlap in sorted(candidates, key=lambda c: -c[1]) if 0.0 < overlap < FIRM_PAD_OVERLAP]
-        for pose in firm + weak:
-            yield pose, True
-        for pose in self._last_resorts(target, tip, peg_points, firm + weak):
-            yield pose, False
+        return firm + weak
 
     def _last_resorts(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray, grasps: list) -> list:
         """``grasps`` again, unchecked: those whose fingers meet the peg's sides first, then those whose fingers come
@@ -617,9 +617,8 @@ class PegInserter:
         of the way in, on every push (Multi-Peg, orbit, seed 62005: the fingers 5 mm below that surface as planned)."""
 
         def clearance(grasp: sapien.Pose) -> float:
-            tip_in_hand = np.linalg.inv(grasp.to_transformation_matrix()) @ tip
-            grip_half_width = np.abs(_across_fingers(grasp, peg_points)).max()
-            return max(self._surface_clearance(target, _along_axis(target.bottom, twist, 0.0) @ np.linalg.inv(tip_in_hand), grip_half_width) for twist in _twists(target.symmetry))
+            tip_in_hand, grip_half_width = _tip_in_hand(grasp, tip), _grip_half_width(grasp, peg_points)
+            return max(self._surface_clearance(target, _hand_matrix_over_hole(target, twist, tip_in_hand, 0.0), grip_half_width) for twist in _twists(target.symmetry))
 
         return sorted(grasps, key=lambda grasp: (not self._fingers_meet_sides(grasp, peg_points), -clearance(grasp)))
 
@@ -743,6 +742,23 @@ def _near_any(pose: sapien.Pose, others: Sequence[sapien.Pose], neighbourhood: t
     ``others`` counts with its wrist-turned twin."""
     twins = [twin for other in others for twin in (other, wrist_turned(other))]
     return any(poses_within((pose.p, pose.q), (twin.p, twin.q), neighbourhood) for twin in twins)
+
+
+def _tip_in_hand(grasp: sapien.Pose, tip: np.ndarray) -> np.ndarray:
+    """The peg's end frame ``tip`` in the frame of a hand at ``grasp``."""
+    return np.linalg.inv(grasp.to_transformation_matrix()) @ tip
+
+
+def _grip_half_width(grasp: sapien.Pose, peg_points: np.ndarray) -> float:
+    """How far (m) either finger closed from ``grasp`` stops from the TCP: the peg's (``peg_points``) farthest point
+    across the fingers."""
+    return float(np.abs(_across_fingers(grasp, peg_points)).max())
+
+
+def _hand_matrix_over_hole(target: PegTarget, twist: float, tip_in_hand: np.ndarray, height: float) -> np.ndarray:
+    """The hand's pose (4x4) holding the tip (``tip_in_hand``) ``height`` above the hole's bottom on its axis, at
+    ``twist``: at 0, the hand with the peg pressed to the bottom."""
+    return _along_axis(target.bottom, twist, height) @ np.linalg.inv(tip_in_hand)
 
 
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:
