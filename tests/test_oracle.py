@@ -632,6 +632,28 @@ def test_the_insertion_plans_grasps_whose_lift_goes_straight_up_first():
     env.close()
 
 
+@pytest.mark.parametrize("straight_in, planned", [(True, True), (False, False)])
+def test_a_grasp_is_planned_only_where_the_hand_comes_in_to_it_in_a_straight_line(inserter, monkeypatch, straight_in, planned):
+    """The peg is not among the planner's obstacles: a joint-space move in to the grasp swings the open fingers off the
+    line of approach and into it (Multi-Peg, orbit, seed 62021: 38 mm off the line, the finger knocked the last peg
+    afloat). A grasp the hand cannot come in to in a straight line is not planned, though another motion reaches it."""
+    oracle = inserter.oracle
+    grasp = sapien.Pose([0.45, 0.0, 0.05], [0.0, 1.0, 0.0, 0.0])
+    start = np.zeros(7)
+    monkeypatch.setattr(oracle, "motion_end", lambda begin, pose, acceleration=1.0: begin + 0.1)  # a joint move reaches any pose
+
+    def screw_path(begin, pose):
+        if np.allclose(pose.p, grasp.p) and not straight_in:
+            return None
+        return np.stack([begin, begin + 0.2])
+
+    monkeypatch.setattr(oracle, "_screw_path", screw_path)
+    lifted = inserter._grasp_and_lift_end(start, grasp)
+    assert (lifted is not None) is planned
+    if planned:
+        np.testing.assert_allclose(lifted, start + 0.1 + 0.2 + 0.2)  # pre-grasp, the straight way in, the straight lift
+
+
 def test_the_insertion_oracles_screw_motions_end_on_their_goal(inserter):
     """mplib's screw motion drifts off its goal by its first-order steps: at its default step a 10 cm push ends
     millimetres off; the insertion oracles step finely enough that it ends within a millimetre (the holes are 1 mm

@@ -611,7 +611,15 @@ class Oracle(Policy):
     def straight_motion_exists(self, start: np.ndarray, pose: sapien.Pose) -> bool:
         """Whether ``screw_to(pose)`` from ``start`` takes the hand in a straight line: mplib's screw motion, or the TCP
         controller's line where the oracle moves in straight lines (``_motion_path`` takes the first of these there is)."""
-        return self._screw_path(start, pose) is not None or self.straight_line_path(start, pose) is not None
+        return self.straight_motion_end(start, pose) is not None
+
+    def straight_motion_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+        """Where ``screw_to(pose)`` from ``start`` leaves the arm if it takes the hand in a straight line (as
+        ``straight_motion_exists``), else None."""
+        path = self._screw_path(start, pose)
+        if path is None:
+            path = self.straight_line_path(start, pose)
+        return None if path is None else path[-1][: len(start)]
 
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8, closing_steps: int = 40) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);

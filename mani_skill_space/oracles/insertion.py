@@ -464,12 +464,16 @@ class PegInserter:
         return True
 
     def _grasp_and_lift_end(self, start: np.ndarray, grasp: sapien.Pose, straight_lift: Optional[bool] = None) -> Optional[np.ndarray]:
-        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail, or if the
-        lift is not (``straight_lift`` True) or is (False) a straight screw motion up. Where there is none, the lift is
-        a joint-space move to another configuration of the arm, which can whirl the peg out of the fingers; a grasp
-        whose lift is straight was already planned with the straight ones, so False leaves it out."""
+        """Arm joints after the pre-grasp, grasp and lift motions from ``start``, or None if one would fail, if the hand
+        cannot come in to the grasp in a straight line (``Oracle.straight_motion_end``), or if the lift is not
+        (``straight_lift`` True) or is (False) a straight screw motion up. The peg is not among the planner's obstacles,
+        and a joint-space move in to the grasp swings the open fingers off the line of approach and into it (traced on
+        Multi-Peg, orbit, seed 62021: 38 mm off the line, the finger knocked the last peg afloat). Where there is no
+        straight lift, the lift is a joint-space move to another configuration of the arm, which can whirl the peg out
+        of the fingers; a grasp whose lift is straight was already planned with the straight ones, so False leaves it
+        out."""
         arm = self.oracle.motion_end(start, backed_off(grasp, PRE_GRASP_DISTANCE), self.settings.pre_grasp_acceleration)
-        arm = None if arm is None else self.oracle.motion_end(arm, grasp)
+        arm = None if arm is None else self.oracle.straight_motion_end(arm, grasp)
         if arm is None:
             return None
         lift = at_height(grasp, self.settings.lift_height)
