@@ -1105,12 +1105,70 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
     solvers = []
     monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
-    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing: (hole, standing))
-    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole: 0.3)
+    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: (hole, standing))
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: True)
     env = SimpleNamespace(pegs=[None] * 4)
     hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, None, list(standing))
     assert hole == chosen and list(insertion) == [("first action of", chosen), ("second action of", chosen)]
     assert solvers[-1] == (chosen, tuple(standing))  # the planner of the peg chosen, with the pegs standing as obstacles
+
+
+@pytest.mark.parametrize(
+    "last_after_other, other_after_last, chosen",
+    [(True, True, 1), (True, False, 1), (False, True, 2), (False, False, 1)],
+)
+def test_of_the_last_two_pegs_the_multi_peg_oracle_inserts_first_the_one_that_leaves_the_other_a_plan(monkeypatch, last_after_other, other_after_last, chosen):
+    """With pegs 0 and 3 standing, 1 goes in before 2 (``MULTI_INSERTION_ORDER``) unless 2 could not start with 1
+    standing and 1 could with 2 standing (orbit, seeds 62033 and 62036: the pegs either side of the last left it no
+    plan)."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles import peg_in_hole
+
+    class FakeInserter:
+        def __init__(self, oracle, settings, reach_obstacles):
+            pass
+
+        def insert(self, target):
+            yield ("first action of", target)
+
+    monkeypatch.setattr(peg_in_hole, "PegInserter", FakeInserter)
+    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: None)
+    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: None)
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    could = {(1, 2): last_after_other, (2, 1): other_after_last}
+    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: could[(first, then)])
+    hole, insertion = oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0, 3])
+    assert hole == chosen and list(insertion) == [("first action of", chosen)]
+
+
+def test_a_peg_seated_for_the_look_ahead_sits_in_its_hole_at_every_twist():
+    """``seated_poses``: the peg as it would stand at the bottom of its hole, the end it is inserted by down, once at
+    each twist its symmetry allows: its points all above the bottom, the lowest at it, and near the hole's axis there."""
+    from mani_skill_space.oracles.base import collision_vertices
+    from mani_skill_space.oracles.insertion import _twists
+    from mani_skill_space.oracles.peg_in_hole import seated_poses
+
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="moon", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=70002)
+    scene = env.unwrapped
+    base = scene.agent.robot.pose.sp.p
+    for hole, peg in enumerate(scene.pegs):
+        bottom = scene.insertion.hole_bottom[0, hole].cpu().numpy().astype(np.float64)
+        radius = float(scene.insertion.peg_radius[0, hole])
+        poses = seated_poses(scene, hole, base)
+        assert len(poses) == len(_twists(int(scene.insertion.symmetry_order[0, hole])))
+        now = np.linalg.inv(peg.pose.sp.to_transformation_matrix())
+        for pose in poses:
+            points = collision_vertices(peg) @ (pose @ now)[:3, :3].T + (pose @ now)[:3, 3]
+            local = (points - bottom[:3, 3]) @ bottom[:3, :3]
+            assert local[:, 2].min() == pytest.approx(0.0, abs=1e-3)
+            near_bottom = local[:, 2] < 1e-3
+            assert np.all(np.linalg.norm(local[near_bottom, :2], axis=1) <= radius + 1e-3)
+    env.close()
 
 
 def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(monkeypatch):
@@ -1130,7 +1188,7 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
     monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
     monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: None)
-    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing: None)
-    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole: 0.3)
+    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: None)
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
     with pytest.raises(PlanningFailed, match="no grasp of peg 3"):
         oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0])

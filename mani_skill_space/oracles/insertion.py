@@ -681,9 +681,7 @@ class PegInserter:
     def _end_toward_arm(self, target: PegTarget) -> int:
         """Of the insertable ends, the one nearest the arm: the hand, tilted toward the tip, then comes from the
         far side of the peg and keeps clear of the rover."""
-        ends = target.end_frames()
-        distance = [np.linalg.norm(ends[i][:2, 3] - self.oracle.solver.base_pose.p[:2]) if target.end_valid[i] else np.inf for i in range(len(ends))]
-        return int(np.argmin(distance))
+        return end_nearest(target, self.oracle.solver.base_pose.p)
 
     # ------------------------------------------------------------------ measuring
     def _tcp_for_tip(self, target: PegTarget, end: int, tip_goal: np.ndarray) -> sapien.Pose:
@@ -708,15 +706,24 @@ def stayed_in(env, peg: int) -> bool:
     return fraction >= STILL_IN_FRACTION and off_axis <= float(env.insertion.peg_radius[0, peg])
 
 
-def other_pegs(pegs: list, peg_assets: list, held: int, standing) -> np.ndarray:
-    """Obstacle points of every peg but ``held``, where it is now: those ``standing`` in their holes with
-    ``PEG_MARGIN`` (an open finger must not knock one out), those still lying without (the hand reaches between
-    them)."""
+def end_nearest(target: PegTarget, point: np.ndarray) -> int:
+    """Of the peg's insertable ends, the one nearest ``point`` seen from above."""
+    ends = target.end_frames()
+    distance = [np.linalg.norm(ends[i][:2, 3] - point[:2]) if target.end_valid[i] else np.inf for i in range(len(ends))]
+    return int(np.argmin(distance))
+
+
+def other_pegs(pegs: list, peg_assets: list, held: int, standing, poses: Optional[dict] = None) -> np.ndarray:
+    """Obstacle points of every peg but ``held``, where it is now (or at each of the poses, 4 x 4, that ``poses`` lists
+    for its index): those ``standing`` in their holes with ``PEG_MARGIN`` (an open finger must not knock one out),
+    those still lying without (the hand reaches between them)."""
+    poses = poses or {}
     points = []
     for i, peg in enumerate(pegs):
         if i != held:
             margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
-            points.append(surface_points(peg_assets[i], peg.pose.sp.to_transformation_matrix(), *margin))
+            for pose in poses.get(i, [peg.pose.sp.to_transformation_matrix()]):
+                points.append(surface_points(peg_assets[i], pose, *margin))
     return np.concatenate(points)
 
 

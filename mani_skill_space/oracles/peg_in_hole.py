@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import replace
-from typing import Iterator
+from typing import Iterator, Optional
 
 import numpy as np
 
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, collision_vertices, surface_points
-from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
+from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, _along_axis, _twists, end_nearest, other_pegs, stayed_in
 from mani_skill_space.oracles.solar_panel import FREE_SPACE_ACCELERATION
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES
@@ -100,34 +100,78 @@ class MultiPegInHoleOracle(Oracle):
         """The next peg to insert and its insertion (actions), its first action already planned: the first peg not yet
         ``standing``, in ``MULTI_INSERTION_ORDER``, whose insertion can start from where the arm and the pegs are now.
         A peg lying beside another can be out of reach until that one is gone: on the tuning seeds, the hand tilted
-        over an outer peg came down on the inner peg lying 9 cm beside it (the Panda's hand is 20 cm across). Where
-        no peg's insertion can start, the first one's failure is raised."""
+        over an outer peg came down on the inner peg lying 9 cm beside it (the Panda's hand is 20 cm across). Of the
+        last two, the second goes first where the last could not start with the other standing in its hole and the
+        other could with it (``_could_start_after``): on orbit tuning seeds 62033 and 62036 the pegs standing in the
+        holes either side of the last left it no plan, and the other order inserted all four.
+        Where no peg's insertion can start, the first one's failure is raised."""
+        waiting = [hole for hole in MULTI_INSERTION_ORDER if hole not in standing]
+        if len(waiting) == 2:
+            first, last = waiting
+            if not self._could_start_after(env, modules, wide_modules, standing, first, last) and self._could_start_after(env, modules, wide_modules, standing, last, first):
+                waiting.reverse()
         failures = []
-        for hole in (hole for hole in MULTI_INSERTION_ORDER if hole not in standing):
-            self.make_solver(env, obstacles=self._obstacles(env, modules, hole, tuple(standing)))
-            settings = replace(MULTI_PEG_INSERTION, lift_height=self._lift_height(env, hole))
-            insertion = PegInserter(self, settings, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
+        for hole in waiting:
+            insertion = self._insertion(env, modules, wide_modules, hole, standing)
             try:
-                first = next(insertion)
+                first_action = next(insertion)
             except PlanningFailed as failure:  # nothing has moved yet: try the next peg
                 failures.append(failure)
                 continue
-            return hole, itertools.chain([first], insertion)
+            return hole, itertools.chain([first_action], insertion)
         raise failures[0]
 
+    def _insertion(self, env, modules: list, wide_modules: np.ndarray, hole: int, standing: list, seated: Optional[dict] = None) -> Iterator[np.ndarray]:
+        """Peg ``hole``'s insertion (actions, planned as they are asked for), with the modules and the other pegs as
+        the planner's obstacles (``_obstacles``; ``seated``: pegs at each of these poses instead of where they are)."""
+        self.make_solver(env, obstacles=self._obstacles(env, modules, hole, tuple(standing), seated))
+        settings = replace(MULTI_PEG_INSERTION, lift_height=self._lift_height(env, hole, seated))
+        return PegInserter(self, settings, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
+
+    def _could_start_after(self, env, modules: list, wide_modules: np.ndarray, standing: list, first: int, then: int) -> bool:
+        """Whether peg ``then``'s insertion could start from where the arm is now if peg ``first`` stood seated in its
+        hole too, at whichever twist its insertion takes (``seated_poses``, all of them as obstacles: planned with the
+        twist that differed, half a turn, from the one the peg went in with, seed 62033's last peg had a plan it then
+        did not have). The arm will have moved by then, but what the standing pegs block is the swing over the hole
+        and the push, wherever the arm starts."""
+        insertion = self._insertion(env, modules, wide_modules, then, [*standing, first], {first: seated_poses(env, first, self.solver.base_pose.p)})
+        try:
+            next(insertion)
+        except PlanningFailed:
+            return False
+        return True
+
     @staticmethod
-    def _lift_height(env, hole: int) -> float:
+    def _lift_height(env, hole: int, seated: Optional[dict] = None) -> float:
         """The TCP's height (world z) for carrying peg ``hole`` over the modules: ``LIFT_CLEARANCE`` above the other
-        pegs' highest point, plus the held peg's bounding-box diagonal (the farthest it can hang below the hand), within
-        Peg-in-Hole's 0.3 m and ``MULTI_PEG_INSERTION``'s 0.45 m (enough for the dataset's 0.2 m peg)."""
-        tops = max(float(collision_vertices(peg)[:, 2].max()) for i, peg in enumerate(env.pegs) if i != hole)
+        pegs' highest point (those ``seated`` names at the highest of its poses, 4 x 4), plus the held peg's bounding-box diagonal (the
+        farthest it can hang below the hand), within Peg-in-Hole's 0.3 m and ``MULTI_PEG_INSERTION``'s 0.45 m (enough
+        for the dataset's 0.2 m peg)."""
+        seated = seated or {}
+
+        def top(index: int, peg) -> float:
+            if index not in seated:
+                return float(collision_vertices(peg)[:, 2].max())
+            vertices = env.peg_assets[index][0].collision_vertices
+            return max(float((vertices @ pose[:3, :3].T + pose[:3, 3])[:, 2].max()) for pose in seated[index])
+
+        tops = max(top(i, peg) for i, peg in enumerate(env.pegs) if i != hole)
         held = env.peg_assets[hole][0].collision_vertices
         hanging = float(np.linalg.norm(held.max(axis=0) - held.min(axis=0)))
         return float(np.clip(tops + hanging + LIFT_CLEARANCE, InsertionSettings.lift_height, MULTI_PEG_INSERTION.lift_height))
 
     @staticmethod
-    def _obstacles(env, modules: list, hole: int, standing: tuple) -> np.ndarray:
-        """The modules and the other pegs where they are now (``other_pegs``)."""
+    def _obstacles(env, modules: list, hole: int, standing: tuple, seated: Optional[dict] = None) -> np.ndarray:
+        """The modules and the other pegs where they are now, or at each of the poses ``seated`` gives (``other_pegs``)."""
         points = [surface_points(env.hole_assets[i][0], module) for i, module in enumerate(modules)]
-        points.append(other_pegs(env.pegs, [assets[0] for assets in env.peg_assets], hole, standing))
+        points.append(other_pegs(env.pegs, [assets[0] for assets in env.peg_assets], hole, standing, seated))
         return np.concatenate(points)
+
+
+def seated_poses(env, hole: int, arm_base: np.ndarray) -> list[np.ndarray]:
+    """The poses (world, 4 x 4) peg ``hole`` could have seated at the bottom of its hole, inserted by its end nearest
+    the arm's base (``arm_base``, as the insertion does: ``PegInserter._end_toward_arm``), one at each twist its
+    profile's symmetry allows."""
+    target = PegTarget.of(env, env.pegs[hole], hole)
+    tip_in_peg = np.linalg.inv(env.pegs[hole].pose.sp.to_transformation_matrix()) @ target.end_frames()[end_nearest(target, arm_base)]
+    return [_along_axis(target.bottom, twist, 0.0) @ np.linalg.inv(tip_in_peg) for twist in _twists(target.symmetry)]
