@@ -1079,6 +1079,21 @@ def test_the_multi_peg_oracle_carries_a_peg_just_high_enough_over_the_others(mon
     assert peg_in_hole.MultiPegInHoleOracle._lift_height(env, 1) == pytest.approx(lift)
 
 
+def _multi_peg_oracle_planning_with(monkeypatch, inserter, obstacles=lambda env, modules, hole, standing, seated=None: None, solvers=None):
+    """The Multi-Peg oracle with ``inserter`` standing in for ``PegInserter``, each peg's target its hole's index, and
+    the obstacles each planner is made with (``obstacles``' result) appended to ``solvers``."""
+    from mani_skill_space.oracles import peg_in_hole
+
+    monkeypatch.setattr(peg_in_hole, "PegInserter", inserter)
+    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    solvers = [] if solvers is None else solvers
+    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
+    monkeypatch.setattr(oracle, "_obstacles", obstacles)
+    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    return oracle
+
+
 @pytest.mark.parametrize(
     "standing, unplannable, chosen",
     [((), (), 0), ((), (0,), 3), ((0,), (3,), 1), ((0,), (3, 1), 2), ((0, 1), (3,), 2), ((0, 3, 1), (), 2)],
@@ -1087,8 +1102,6 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
     """The pegs go in ``MULTI_INSERTION_ORDER``, but a peg whose insertion cannot start now (no grasp: a neighbour lies
     under the hand) waits until the others are in; its first action comes with the insertion chosen."""
     from types import SimpleNamespace
-
-    from mani_skill_space.oracles import peg_in_hole
 
     class FakeInserter:
         def __init__(self, oracle, settings, reach_obstacles):
@@ -1100,13 +1113,8 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
             yield ("first action of", target)
             yield ("second action of", target)
 
-    monkeypatch.setattr(peg_in_hole, "PegInserter", FakeInserter)
-    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
-    oracle = oracle_for("MultiPegInHoleAssembly-v1")
     solvers = []
-    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
-    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: (hole, standing))
-    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    oracle = _multi_peg_oracle_planning_with(monkeypatch, FakeInserter, obstacles=lambda env, modules, hole, standing, seated=None: (hole, standing), solvers=solvers)
     monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: True)
     env = SimpleNamespace(pegs=[None] * 4)
     hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, None, list(standing))
@@ -1124,8 +1132,6 @@ def test_of_the_last_two_pegs_the_multi_peg_oracle_inserts_first_the_one_that_le
     plan)."""
     from types import SimpleNamespace
 
-    from mani_skill_space.oracles import peg_in_hole
-
     class FakeInserter:
         def __init__(self, oracle, settings, reach_obstacles):
             pass
@@ -1133,12 +1139,7 @@ def test_of_the_last_two_pegs_the_multi_peg_oracle_inserts_first_the_one_that_le
         def insert(self, target):
             yield ("first action of", target)
 
-    monkeypatch.setattr(peg_in_hole, "PegInserter", FakeInserter)
-    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
-    oracle = oracle_for("MultiPegInHoleAssembly-v1")
-    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: None)
-    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: None)
-    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    oracle = _multi_peg_oracle_planning_with(monkeypatch, FakeInserter)
     could = {(1, 2): last_after_other, (2, 1): other_after_last}
     monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: could[(first, then)])
     hole, insertion = oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0, 3])
@@ -1174,8 +1175,6 @@ def test_a_peg_seated_for_the_look_ahead_sits_in_its_hole_at_every_twist():
 def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(monkeypatch):
     from types import SimpleNamespace
 
-    from mani_skill_space.oracles import peg_in_hole
-
     class NeverStarts:
         def __init__(self, oracle, settings, reach_obstacles):
             pass
@@ -1184,11 +1183,6 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
             raise PlanningFailed(f"no grasp of peg {target}")
             yield
 
-    monkeypatch.setattr(peg_in_hole, "PegInserter", NeverStarts)
-    monkeypatch.setattr(peg_in_hole.PegTarget, "of", staticmethod(lambda env, peg, hole: hole))
-    oracle = oracle_for("MultiPegInHoleAssembly-v1")
-    monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: None)
-    monkeypatch.setattr(oracle, "_obstacles", lambda env, modules, hole, standing, seated=None: None)
-    monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    oracle = _multi_peg_oracle_planning_with(monkeypatch, NeverStarts)
     with pytest.raises(PlanningFailed, match="no grasp of peg 3"):
         oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0])
