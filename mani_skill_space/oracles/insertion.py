@@ -419,12 +419,12 @@ class PegInserter:
                 continue
             tip_in_hand = _tip_in_hand(grasp, tip)
             grip_half_width = _grip_half_width(grasp, peg_points)
-            hand_over_hole = lambda twist: _hand_matrix_over_hole(target, twist, tip_in_hand, depth)  # noqa: E731
+            hand_over_hole = lambda twist: _frame_holding_tip_over_hole(target, twist, tip_in_hand, depth)  # noqa: E731
             # the hand pointing down and away from the arm first
             score = lambda twist: 2.0 * hand_over_hole(twist)[2, 2] - hand_over_hole(twist)[:3, 2] @ outward  # noqa: E731
             holding = np.full_like(self.oracle.finger_qpos(), grip_half_width)  # each finger closed on the peg
             for twist in sorted(_twists(target.symmetry), key=score):
-                pressed = _hand_matrix_over_hole(target, twist, tip_in_hand, 0.0)
+                pressed = _frame_holding_tip_over_hole(target, twist, tip_in_hand, 0.0)
                 if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
                 with self._reaching(), self.oracle.fingers_planned_at(holding):
@@ -558,7 +558,7 @@ class PegInserter:
     @staticmethod
     def _hand_over_hole(target: PegTarget, twist, tip_in_hand, height: float) -> sapien.Pose:
         """The hand pose holding the tip (``tip_in_hand``) ``height`` above the hole's bottom on its axis, at ``twist``."""
-        return sapien.Pose(_hand_matrix_over_hole(target, twist, tip_in_hand, height))
+        return sapien.Pose(_frame_holding_tip_over_hole(target, twist, tip_in_hand, height))
 
     def _insertion_arm(
         self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
@@ -622,7 +622,7 @@ class PegInserter:
 
         def clearance(grasp: sapien.Pose) -> float:
             tip_in_hand, grip_half_width = _tip_in_hand(grasp, tip), _grip_half_width(grasp, peg_points)
-            return max(self._surface_clearance(target, _hand_matrix_over_hole(target, twist, tip_in_hand, 0.0), grip_half_width) for twist in _twists(target.symmetry))
+            return max(self._surface_clearance(target, _frame_holding_tip_over_hole(target, twist, tip_in_hand, 0.0), grip_half_width) for twist in _twists(target.symmetry))
 
         return sorted(grasps, key=lambda grasp: (not self._fingers_meet_sides(grasp, peg_points), -clearance(grasp)))
 
@@ -766,10 +766,10 @@ def _grip_half_width(grasp: sapien.Pose, peg_points: np.ndarray) -> float:
     return float(np.abs(_across_fingers(grasp, peg_points)).max())
 
 
-def _hand_matrix_over_hole(target: PegTarget, twist: float, tip_in_hand: np.ndarray, height: float) -> np.ndarray:
-    """The hand's pose (4x4) holding the tip (``tip_in_hand``) ``height`` above the hole's bottom on its axis, at
-    ``twist``: at 0, the hand with the peg pressed to the bottom."""
-    return _along_axis(target.bottom, twist, height) @ np.linalg.inv(tip_in_hand)
+def _frame_holding_tip_over_hole(target: PegTarget, twist: float, tip_in_frame: np.ndarray, height: float) -> np.ndarray:
+    """The pose (world, 4x4) of a frame (the hand's, or the peg's own) that holds the peg's tip (``tip_in_frame``)
+    ``height`` above the hole's bottom on its axis, at ``twist``: at 0, the peg pressed to the bottom."""
+    return _along_axis(target.bottom, twist, height) @ np.linalg.inv(tip_in_frame)
 
 
 def _across_fingers(hand: sapien.Pose, points: np.ndarray) -> np.ndarray:

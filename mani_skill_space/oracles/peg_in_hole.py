@@ -13,7 +13,7 @@ from typing import Iterator, Optional
 import numpy as np
 
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, collision_vertices, surface_points
-from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, _along_axis, _twists, end_nearest, other_pegs, stayed_in
+from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, _frame_holding_tip_over_hole, _twists, end_nearest, other_pegs, stayed_in
 from mani_skill_space.oracles.solar_panel import FREE_SPACE_ACCELERATION
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES
@@ -144,9 +144,9 @@ class MultiPegInHoleOracle(Oracle):
     @staticmethod
     def _lift_height(env, hole: int, seated: Optional[dict] = None) -> float:
         """The TCP's height (world z) for carrying peg ``hole`` over the modules: ``LIFT_CLEARANCE`` above the other
-        pegs' highest point (those ``seated`` names at the highest of its poses, 4 x 4), plus the held peg's bounding-box diagonal (the
-        farthest it can hang below the hand), within Peg-in-Hole's 0.3 m and ``MULTI_PEG_INSERTION``'s 0.45 m (enough
-        for the dataset's 0.2 m peg)."""
+        pegs' highest point (those ``seated`` names at the highest of its poses, 4 x 4), plus the held peg's
+        bounding-box diagonal (the farthest it can hang below the hand), within Peg-in-Hole's 0.3 m and
+        ``MULTI_PEG_INSERTION``'s 0.45 m (enough for the dataset's 0.2 m peg)."""
         seated = seated or {}
 
         def top(index: int, peg) -> float:
@@ -174,4 +174,4 @@ def seated_poses(env, hole: int, arm_base: np.ndarray) -> list[np.ndarray]:
     profile's symmetry allows."""
     target = PegTarget.of(env, env.pegs[hole], hole)
     tip_in_peg = np.linalg.inv(env.pegs[hole].pose.sp.to_transformation_matrix()) @ target.end_frames()[end_nearest(target, arm_base)]
-    return [_along_axis(target.bottom, twist, 0.0) @ np.linalg.inv(tip_in_peg) for twist in _twists(target.symmetry)]
+    return [_frame_holding_tip_over_hole(target, twist, tip_in_peg, 0.0) for twist in _twists(target.symmetry)]
