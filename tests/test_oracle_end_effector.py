@@ -179,6 +179,34 @@ def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_
     env.reset(seed=0)
 
 
+def test_where_the_controller_leaves_the_arm_after_a_planned_motion_is_predicted(ee_env):
+    """A plan checked before moving chains each motion from where the one before leaves the arm. Under a TCP controller
+    that is where its IK leaves it along the motion (``Oracle.motion_end``, ``straight_motion_end``, ``screw_end``:
+    ``Oracle._followed_end``), not the planned path's last joints: traced on Solar Panel Assembly (procedural, Moon,
+    seed 6000), a pre-grasp motion planned to end with the first joint at -1.91 rad ended at -0.07, and the grasp
+    planned from the planned end stalled 44 mm short of the peg. Here ``screw_to``'s motion (mplib has no screw there,
+    so a joint-space move) is planned to end 0.9 rad from where the controller takes the arm; a controller that would
+    stall leaves no plan."""
+    env = ee_env.unwrapped
+    policy = _peg_oracle_in_ee(ee_env)
+    oracle = policy.oracle
+    start, hand = oracle.arm_qpos(), oracle.tcp_pose()
+    turn = Rotation.from_rotvec([-0.23, 0.07, -0.68])
+    goal = sapien.Pose(hand.p + [-0.3, -0.11, -0.27], _wxyz(turn * Rotation.from_quat(np.roll(hand.q, -1))))
+    planned_end = oracle._planned_motion(start, goal, 1.0)[-1][: len(start)]
+    predicted = oracle.motion_end(start, goal)
+    targets = [action[:-1] for action in oracle.screw_to(goal, "move")]
+    for target in targets + targets[-1:] * 10:
+        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
+        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+    reached = oracle.arm_qpos().copy()
+    assert np.abs(reached - planned_end).max() > 0.5  # the arm did not end where the path did...
+    np.testing.assert_allclose(reached, predicted, atol=0.1)  # ...but where the prediction said
+    oracle.arm_follower = lambda start, path: None  # a controller that stalls short of the goal
+    assert oracle.motion_end(start, goal) is None
+    env.reset(seed=0)
+
+
 def test_the_solar_panel_oracle_assembles_within_the_episode_in_ee_delta_pose():
     """Solar Panel Assembly's four pegs and panel fit its 1000 steps in this mode with the hand moving in straight lines
     (``Oracle.straight_lines_under_tcp_control``; with joint-space swings seed 0 filled three sockets, and before

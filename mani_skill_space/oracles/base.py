@@ -338,10 +338,22 @@ class Oracle(Policy):
         return None
 
     def motion_end(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
-        """Where ``screw_to(pose, acceleration=acceleration)`` from ``start`` would leave the arm (``_motion_path``), or None
-        if it would fail: for checking a whole plan before moving."""
+        """Where ``screw_to(pose, acceleration=acceleration)`` from ``start`` would leave the arm (``_motion_path``, as
+        ``_followed_end``), or None if it would fail: for checking a whole plan before moving."""
         path = self._planned_motion(start, pose, acceleration)
-        return None if path is None else path[-1][: len(start)]
+        return None if path is None else self._followed_end(start, path, acceleration)
+
+    def _followed_end(self, start: np.ndarray, path: np.ndarray, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where the arm ends after ``path`` (joints, one row a waypoint, from ``start``): its last joints, or, acting
+        through a TCP controller (``arm_follower``), where the controller's IK leaves the arm sent the path as ``paced``
+        sends it (None where it stalls short). The hand ends at the path's last pose either way, but the arm may not:
+        traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6000, the third peg), a screw
+        motion to the pre-grasp pose planned to end with the first joint at -1.91 rad ended at -0.07, the second joint
+        at its limit, and the grasp motion planned from the planned end stalled 44 mm short of the peg."""
+        arm_path = np.asarray(path)[:, : len(start)]
+        if self.arm_follower is None:
+            return arm_path[-1]
+        return self.arm_follower(start, self.paced(arm_path, start, acceleration))
 
     def motion_steps(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[int]:
         """How many control steps ``screw_to(pose, acceleration=acceleration)`` from ``start`` would take (as ``paced``
@@ -354,9 +366,10 @@ class Oracle(Policy):
             return self._motion_path(start, pose, acceleration)
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
-        """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends, or None if there is none."""
+        """Arm joints where the screw motion of the TCP from ``start`` to ``pose`` ends (as ``_followed_end``), or None if
+        there is none."""
         positions = self._screw_path(start, pose)
-        return None if positions is None else positions[-1][: len(start)]
+        return None if positions is None else self._followed_end(start, positions)
 
     def straight_line_path(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where the oracle moves in straight lines (``moves_in_straight_lines``), the arm joint targets that take the hand
@@ -619,7 +632,7 @@ class Oracle(Policy):
         path = self._screw_path(start, pose)
         if path is None:
             path = self.straight_line_path(start, pose)
-        return None if path is None else path[-1][: len(start)]
+        return None if path is None else self._followed_end(start, path)
 
     def wait_for_grasp(self, actor, what: str, most_steps: int = 8, closing_steps: int = 40) -> Iterator[np.ndarray]:
         """Hold the closed gripper until it grasps ``actor`` (the fingers' forces build up over a few steps);
