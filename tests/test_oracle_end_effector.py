@@ -159,6 +159,16 @@ def _peg_oracle_in_ee(ee_env) -> EndEffectorDeltaPose:
     return policy
 
 
+def _joints_after_sending(ee_env, policy, actions) -> np.ndarray:
+    """The arm's joints after the oracle's joint-target ``actions`` are sent as ``policy`` sends them (the TCP pose each
+    puts the hand in, as a delta), the last held 10 more steps."""
+    targets = [action[:-1] for action in actions]
+    for target in targets + targets[-1:] * 10:
+        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
+        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+    return policy.oracle.arm_qpos().copy()
+
+
 def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_env):
     """A TCP controller follows the hand's poses along a joint move but settles the arm's redundancy its own way: the
     oracle predicts the joints it ends in (``Oracle.joint_move_end``), which are not the move's goal."""
@@ -168,11 +178,7 @@ def test_where_the_controller_leaves_the_arm_after_a_joint_move_is_predicted(ee_
     start = oracle.arm_qpos()
     goal = start + np.array([0.9, 0.3, -0.9, 0.3, 0.9, 0.5, -0.6])
     predicted = oracle.joint_move_end(start, goal)
-    targets = [action[:-1] for action in oracle.joint_move(goal, "swing")]
-    for target in targets + targets[-1:] * 10:
-        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
-        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
-    reached = oracle.arm_qpos().copy()
+    reached = _joints_after_sending(ee_env, policy, oracle.joint_move(goal, "swing"))
     assert np.abs(reached - goal).max() > 0.3  # the arm did not end at the move's goal...
     np.testing.assert_allclose(reached, predicted, atol=0.05)  # ...but where the prediction said
     np.testing.assert_allclose(oracle._tcp_poses([reached])[0], oracle._tcp_poses([goal])[0], atol=0.005)
@@ -195,11 +201,7 @@ def test_where_the_controller_leaves_the_arm_after_a_planned_motion_is_predicted
     goal = sapien.Pose(hand.p + [-0.3, -0.11, -0.27], _wxyz(turn * Rotation.from_quat(np.roll(hand.q, -1))))
     planned_end = oracle._planned_motion(start, goal, 1.0)[-1][: len(start)]
     predicted = oracle.motion_end(start, goal)
-    targets = [action[:-1] for action in oracle.screw_to(goal, "move")]
-    for target in targets + targets[-1:] * 10:
-        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
-        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
-    reached = oracle.arm_qpos().copy()
+    reached = _joints_after_sending(ee_env, policy, oracle.screw_to(goal, "move"))
     assert np.abs(reached - planned_end).max() > 0.5  # the arm did not end where the path did...
     np.testing.assert_allclose(reached, predicted, atol=0.1)  # ...but where the prediction said
     oracle.arm_follower = lambda start, path: None  # a controller that stalls short of the goal
