@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 import mani_skill_space  # noqa: F401
 from mani_skill_space.oracles import oracle_for
+from mani_skill_space.oracles.base import CATCH_UP_STEPS, CATCH_UP_TOLERANCE, poses_within
 from mani_skill_space.oracles.end_effector import (
     ROTATION_SPEED_FRACTION,
     TRANSLATION_SPEED_FRACTION,
@@ -207,6 +208,38 @@ def test_where_the_controller_leaves_the_arm_after_a_planned_motion_is_predicted
     oracle.arm_follower = lambda start, path: None  # a controller that stalls short of the goal
     assert oracle.motion_end(start, goal) is None
     env.reset(seed=0)
+
+
+def test_the_hand_catches_up_with_a_brisk_motion_before_the_next(ee_env):
+    """The hand lags its targets by about two control steps, and the motion after a brisk one starts from where the arm
+    is (traced on Solar Panel Assembly, procedural, Moon, seed 6021: the straight way in to a grasp, planned from the
+    pre-grasp pose, ran into the peg from 9 cm short of it). ``Oracle.catch_up`` holds the last target until the hand is
+    there, and holds nothing once it is, or in joint control."""
+    policy = _peg_oracle_in_ee(ee_env)
+    oracle = policy.oracle
+    hand = oracle.tcp_pose()
+    goal = sapien.Pose(hand.p + [-0.3, -0.11, -0.2], hand.q)
+
+    def steps_sent(actions) -> int:
+        sent = 0
+        for action in actions:
+            oracle.last_action = action
+            arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(action[:-1]))
+            ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+            sent += 1
+        return sent
+
+    def hand_within_tolerance() -> bool:
+        return poses_within((oracle.tcp_pose().p, oracle.tcp_pose().q), (goal.p, goal.q), CATCH_UP_TOLERANCE)
+
+    steps_sent(oracle.screw_to(goal, "move", acceleration=2.0))
+    assert not hand_within_tolerance()  # the motion's targets have all been sent, the hand is not there yet
+    assert 0 < steps_sent(oracle.catch_up(goal)) <= CATCH_UP_STEPS
+    assert hand_within_tolerance()
+    assert steps_sent(oracle.catch_up(goal)) == 0
+    oracle.tcp_speed_limit = None  # joint control
+    assert steps_sent(oracle.catch_up(sapien.Pose(goal.p + [0.1, 0.0, 0.0], goal.q))) == 0
+    ee_env.unwrapped.reset(seed=0)
 
 
 def test_the_solar_panel_oracle_assembles_within_the_episode_in_ee_delta_pose():

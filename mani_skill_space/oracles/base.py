@@ -41,6 +41,10 @@ FINE_SCREW_STEP = 0.02
 """rad: a finer joint step for mplib's screw motions (``Oracle.screw_step``). mplib follows the screw with first-order
 (Jacobian) steps of that size and never corrects their drift: at its default, 0.1, 39 of the 98 screw motions of the
 traced Peg-in-Hole episodes ended 5-11 mm from their goal; at 0.02 none did."""
+CATCH_UP_STEPS = 6
+CATCH_UP_TOLERANCE = (0.01, 0.05)
+"""At most this many steps (m, rad: until the hand is this close to its goal) ``Oracle.catch_up`` holds a motion's
+last target under a TCP controller."""
 SERVO_JOINT_STEP = 0.3
 """rad: the most a servo step moves any joint's target (6 rad/s at 20 Hz, over twice the Panda's joint speed limits).
 Near a joint limit, IK from the present joints can return a solution on another branch (seed 64005 of Solar Panel
@@ -219,6 +223,22 @@ class Oracle(Policy):
                     raise PlanningFailed(f"no motion to the {what} pose")
             yield from self._follow(self.paced(positions, acceleration=acceleration), retime=False)
         yield from self._follow(np.repeat(positions[-1:], settle_steps, axis=0), retime=False)
+
+    def catch_up(self, pose: sapien.Pose, most_steps: int = CATCH_UP_STEPS) -> Iterator[np.ndarray]:
+        """Acting through a TCP controller (``tcp_speed_limit`` set), hold the last target sent until the hand is within
+        ``CATCH_UP_TOLERANCE`` of ``pose``, at most ``most_steps`` steps; in joint control, nothing. The hand lags its
+        targets by about two control steps, 0.1 m at the end of a brisk motion, and the motion after it starts from
+        where the arm is: traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6021, the
+        fourth peg), the straight way in to the grasp, planned from the pre-grasp pose, ran into the peg from 9 cm short
+        of it, and the joint-space move taken instead whirled the hand 2.2 m round for 79 steps."""
+        if self.tcp_speed_limit is None or self.last_action is None:
+            return
+        goal = (pose.p, pose.q)
+        for _ in range(most_steps):
+            hand = self.tcp_pose()
+            if poses_within((hand.p, hand.q), goal, CATCH_UP_TOLERANCE):
+                return
+            yield self.last_action
 
     def line_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0) -> Iterator[np.ndarray]:
         """Under a TCP controller (``line_follower`` set), the hand in a straight line to ``pose`` at the oracle's speed

@@ -189,7 +189,8 @@ class InsertionSettings:
     """How often the tip is re-lined up over the entrance, re-measuring the peg in the hand, before the push."""
     pre_grasp_acceleration: float = 1.0
     """Joint accelerations, as a multiple of the oracle's usual ones, of the empty hand's motion to the pre-grasp
-    pose."""
+    pose. Where above 1, under a TCP controller the hand catches up with the pre-grasp pose before it goes in to the
+    grasp (``Oracle.catch_up``)."""
     carry_acceleration_under_tcp_control: float = 1.0
     """For an oracle acting through a TCP controller (``pd_ee_delta_pose``), joint accelerations, as a multiple of the
     oracle's usual ones, of the held peg's lift and of the straight line that carries it over the hole at the lift
@@ -264,7 +265,10 @@ class PegInserter:
             grasp, twist = self._plan_grasp(target, end, missed)
             grasp_on_peg = _in_frame_of(target.peg, grasp)
             with self._reaching():
-                yield from self.oracle.screw_to(backed_off(grasp, PRE_GRASP_DISTANCE), "pre-grasp", acceleration=self.settings.pre_grasp_acceleration)
+                pre_grasp = backed_off(grasp, PRE_GRASP_DISTANCE)
+                yield from self.oracle.screw_to(pre_grasp, "pre-grasp", acceleration=self.settings.pre_grasp_acceleration)
+                if self.settings.pre_grasp_acceleration > 1.0:  # a brisk motion ends with the hand up to 0.1 m behind
+                    yield from self.oracle.catch_up(pre_grasp)
                 yield from self.oracle.screw_to(grasp, "grasp", SETTLE_STEPS)
                 yield from self.oracle.set_gripper(GRIPPER_CLOSED)
                 try:
