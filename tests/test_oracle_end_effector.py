@@ -242,6 +242,16 @@ def test_the_hand_catches_up_with_a_brisk_motion_before_the_next(ee_env):
     ee_env.unwrapped.reset(seed=0)
 
 
+def test_a_servo_ends_before_the_first_step_its_condition_holds_for(ee_env):
+    """``Oracle.servo``'s ``until``: a push under a TCP controller ends once its schedule has run and the peg is seated
+    (``insertion.SEATED_TIP_HEIGHT``), not after all its extra steps."""
+    oracle = _peg_oracle_in_ee(ee_env).oracle
+    hand = oracle.tcp_pose()
+    assert len(list(oracle.servo(lambda step: hand, 10, "hold", until=lambda step: step >= 3))) == 3
+    assert len(list(oracle.servo(lambda step: hand, 10, "hold", until=lambda step: False))) == 10
+    assert len(list(oracle.servo(lambda step: hand, 10, "hold"))) == 10
+
+
 def test_the_solar_panel_oracle_assembles_within_the_episode_in_ee_delta_pose():
     """Solar Panel Assembly's four pegs and panel fit its 1000 steps in this mode with the hand moving in straight lines
     (``Oracle.straight_lines_under_tcp_control``; with joint-space swings seed 0 filled three sockets, and before

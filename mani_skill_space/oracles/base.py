@@ -590,15 +590,18 @@ class Oracle(Policy):
                 return False
         return True
 
-    def servo(self, target: Callable[[int], sapien.Pose], steps: int, what: str) -> Iterator[np.ndarray]:
+    def servo(self, target: Callable[[int], sapien.Pose], steps: int, what: str, until: Optional[Callable[[int], bool]] = None) -> Iterator[np.ndarray]:
         """Closed-loop Cartesian servo: at every step, the TCP pose ``target(step)`` (recomputed from the scene as
         it is now), solved by IK from the current joints and sent as the joint target. Where a step's pose has no
         solution (e.g. pressing past a stop), or whose solution is on another branch of the arm's inverse kinematics
-        (a joint more than ``SERVO_JOINT_STEP`` away), the previous target is held."""
+        (a joint more than ``SERVO_JOINT_STEP`` away), the previous target is held. It runs ``steps`` steps, or, given
+        ``until``, ends before the first step for which ``until(step)`` holds (checked on the scene as it is then)."""
         self.phase = what
         planner = self.solver.planner
         command = self.hold_action()
         for step in range(steps):
+            if until is not None and until(step):
+                return
             self._plan_from_the_base_now()
             self._plan_with_the_fingers_now()
             goal = self.solver.base_pose.inv() * target(step)
