@@ -252,6 +252,30 @@ def test_a_servo_ends_before_the_first_step_its_condition_holds_for(ee_env):
     assert len(list(oracle.servo(lambda step: hand, 10, "hold"))) == 10
 
 
+def test_the_hand_goes_over_the_top_up_across_and_down(ee_env):
+    """``Oracle.over_the_top_path``: the hand straight up to the oracle's ``via_height``, straight across at it, straight
+    down to the goal, each line the controller's own IK within the speed limit; nothing where the oracle has no
+    ``via_height``."""
+    policy = _peg_oracle_in_ee(ee_env)
+    oracle = policy.oracle
+    start, hand = oracle.arm_qpos(), oracle.tcp_pose()
+    goal = sapien.Pose(hand.p + [-0.15, 0.2, -0.05], hand.q)
+    assert oracle.over_the_top_path(start, goal) is None  # the peg's oracle moves in no such paths
+    oracle.straight_lines_under_tcp_control, oracle.via_height = True, float(hand.p[2]) + 0.15
+    path = oracle.over_the_top_path(start, goal)
+    positions, _ = oracle._tcp_poses(np.concatenate([start[None], path]))
+    top = np.isclose(positions[:, 2], oracle.via_height, atol=0.005)
+    first, last = np.flatnonzero(top)[[0, -1]]
+    assert np.all(np.diff(positions[: first + 1, 2]) > -1e-4)  # up...
+    np.testing.assert_allclose(positions[first, :2], hand.p[:2], atol=0.005)
+    assert np.all(top[first : last + 1])  # ...across at the height...
+    np.testing.assert_allclose(positions[last, :2], goal.p[:2], atol=0.005)
+    assert np.all(np.diff(positions[last:, 2]) < 1e-4)  # ...and down
+    np.testing.assert_allclose(positions[-1], goal.p, atol=0.005)
+    metres, _ = oracle.tcp_step_limit()
+    assert np.linalg.norm(np.diff(positions, axis=0), axis=1).max() <= metres * 1.05
+
+
 def test_the_solar_panel_oracle_assembles_within_the_episode_in_ee_delta_pose():
     """Solar Panel Assembly's four pegs and panel fit its 1000 steps in this mode with the hand moving in straight lines
     (``Oracle.straight_lines_under_tcp_control``; with joint-space swings seed 0 filled three sockets, and before

@@ -109,6 +109,10 @@ class Oracle(Policy):
     """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
     may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
     motions, e.g. an empty hand's to its next grasp)."""
+    via_height: Optional[float] = None
+    """Where set (m, world z), an oracle moving in straight lines (``moves_in_straight_lines``) may also take the hand
+    up to this height, across and down (``over_the_top_path``) where mplib's screw motion and the straight line have no
+    path, if that is quicker than the joint-space move or the arc round the base."""
     path_check_step: Optional[float] = None
     """Where set (radians), ``path_is_free`` checks a joint-space move at least this often along it, not only at
     its 20 samples: thin obstacles that stand up high (e.g. inserted pegs) can fall between the samples of a long
@@ -335,19 +339,44 @@ class Oracle(Policy):
 
     def _path_without_screw(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where mplib's screw motion has no path from ``start`` to ``pose``: the hand's straight line there where the
-        oracle moves in them (``straight_line_path``); where there is none, the quicker (paced at ``acceleration``) of
+        oracle moves in them (``straight_line_path``); where there is none, the quickest (paced at ``acceleration``) of
         the hand's arc round the arm's base (``arcs_round_base``: from one side of the base to the other, a joint-space
-        move may whirl the hand round for 130 steps where the arc takes 40) and the joint-space move to the nearest
-        collision-free IK solution; None if there is neither."""
+        move may whirl the hand round for 130 steps where the arc takes 40), its path up, across and down
+        (``over_the_top_path``) and the joint-space move to the nearest collision-free IK solution; None if there is
+        none."""
         line = self.straight_line_path(start, pose, acceleration)
         if line is not None:
             return line
         goal = self.free_joint_goal(start, pose)
         joint = None if goal is None else self._timed_path(start, goal)  # screw_to paces it
-        arcs = self.arcs_round_base(start, pose, acceleration)
-        if arcs and (joint is None or len(arcs[0]) < len(self.paced(joint, start, acceleration))):
-            return arcs[0]
+        over_the_top = self.over_the_top_path(start, pose, acceleration)
+        hand_paths = self.arcs_round_base(start, pose, acceleration)[:1] + ([over_the_top] if over_the_top is not None else [])
+        quickest = min(hand_paths, key=len, default=None)
+        if quickest is not None and (joint is None or len(quickest) < len(self.paced(joint, start, acceleration))):
+            return quickest
         return joint
+
+    def over_the_top_path(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where the oracle moves in straight lines and has a ``via_height``, the arm joint targets that take the hand
+        straight up to that height from where ``start`` puts it, straight across to above ``pose`` (turning to its
+        orientation on the way) and straight down to it (each line ``straight_line_path``, chained from where the
+        controller leaves the arm), if the controller gets there with the arm clear of collisions; else None."""
+        if not self.moves_in_straight_lines or self.via_height is None:
+            return None
+        positions, rotations = self._tcp_poses([start])
+        height = max(self.via_height, float(positions[0][2]), float(pose.p[2]))
+        up = sapien.Pose([*positions[0][:2], height], np.roll(rotations[0].as_quat(), 1))
+        paths, arm = [], np.asarray(start)
+        for waypoint in (up, at_height(pose, height), pose):
+            (position,), (rotation,) = self._tcp_poses([arm])
+            if np.linalg.norm(waypoint.p - position) < 1e-3 and turn_between(waypoint.q, np.roll(rotation.as_quat(), 1)) < 1e-3:
+                continue  # already there (a hand at the height goes straight across)
+            path = self.straight_line_path(arm, waypoint, acceleration)
+            if path is None:
+                return None
+            paths.append(path)
+            arm = path[-1]
+        return np.concatenate(paths) if paths else None
 
     def free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
         """The IK solution for ``pose`` nearest ``start`` that a straight joint move from ``start`` reaches

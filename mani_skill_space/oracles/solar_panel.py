@@ -69,6 +69,12 @@ class SolarPanelOracle(Oracle):
     screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
     """Inserted pegs are thin and stand up high: a check at 20 points of a long swing can step over one."""
+    via_height = PEG_LIFT_HEIGHT
+    """Where neither mplib's screw nor the hand's straight line gets there, the empty hand may go over the standing pegs
+    at the height a peg is carried at (``Oracle.over_the_top_path``): traced on procedural seed 6021 in
+    ``pd_ee_delta_pose``, the joint-space move to the third peg's pre-grasp pose took 75 steps and 1.5 m of travel for
+    0.7 m and left the arm where the fourth peg's grasp had no motion; over the top it takes 66 steps and the episode
+    assembles."""
     straight_lines_under_tcp_control = True
     """In ``pd_ee_delta_pose`` the four pegs and the panel fit the 1000 steps only so (Moon, reference assets, seeds
     6000-6019: 4 of 20 assemblies, mean stage 6.35 of 8, against none and 3.25 with joint-space swings; with the
