@@ -160,13 +160,19 @@ def _peg_oracle_in_ee(ee_env) -> EndEffectorDeltaPose:
     return policy
 
 
+def _send(ee_env, policy, target) -> None:
+    """Step ``ee_env`` with the arm joint ``target`` as ``policy`` sends it: the TCP pose it puts the hand in, as a
+    delta (the gripper open)."""
+    arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
+    ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+
+
 def _joints_after_sending(ee_env, policy, actions) -> np.ndarray:
-    """The arm's joints after the oracle's joint-target ``actions`` are sent as ``policy`` sends them (the TCP pose each
-    puts the hand in, as a delta), the last held 10 more steps."""
+    """The arm's joints after the oracle's joint-target ``actions`` are sent as ``policy`` sends them, the last held 10
+    more steps."""
     targets = [action[:-1] for action in actions]
     for target in targets + targets[-1:] * 10:
-        arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(target))
-        ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+        _send(ee_env, policy, target)
     return policy.oracle.arm_qpos().copy()
 
 
@@ -224,8 +230,7 @@ def test_the_hand_catches_up_with_a_brisk_motion_before_the_next(ee_env):
         sent = 0
         for action in actions:
             oracle.last_action = action
-            arm = delta_action_to(policy.controller, policy.tcp_pose_at_base(action[:-1]))
-            ee_env.step(np.concatenate([arm, [1.0]]).astype(np.float32))
+            _send(ee_env, policy, action[:-1])
             sent += 1
         return sent
 

@@ -369,7 +369,7 @@ class Oracle(Policy):
         paths, arm = [], np.asarray(start)
         for waypoint in (up, at_height(pose, height), pose):
             (position,), (rotation,) = self._tcp_poses([arm])
-            if np.linalg.norm(waypoint.p - position) < 1e-3 and turn_between(waypoint.q, np.roll(rotation.as_quat(), 1)) < 1e-3:
+            if poses_within((waypoint.p, waypoint.q), (position, np.roll(rotation.as_quat(), 1)), (1e-3, 1e-3)):
                 continue  # already there (a hand at the height goes straight across)
             path = self.straight_line_path(arm, waypoint, acceleration)
             if path is None:
