@@ -2,7 +2,8 @@
 # mani-skill-space developer entry point. Sets everything up (idempotent, quick when already done), then:
 #   bash run.sh main [args]   run the main job: the oracle and random policies on the smoke suite
 #                             (python -m mani_skill_space.eval --suite smoke --policy oracle random)
-#   bash run.sh test [args]   run the test suite (pytest)
+#   bash run.sh test [args]   run the test suite (pytest, in two worker processes: pytest-xdist's -n 2;
+#                             -n 0 runs it in one)
 #   bash run.sh setup         only set up
 # Setup: system packages on Debian 12 (python3-venv; the software Vulkan driver only when SAPIEN finds no
 # rendering device), a .venv with the pinned stack (constraints.txt) and this package in editable mode.
@@ -94,6 +95,6 @@ command=${1:-main}
 case "$command" in
     setup) setup ;;
     main) setup; exec "$PY" -m mani_skill_space.eval --suite smoke --policy oracle random "$@" ;;
-    test) setup; exec "$PY" -m pytest "$@" ;;
+    test) setup; exec "$PY" -m pytest -n 2 --dist loadgroup "$@" ;;
     *) echo "usage: bash run.sh [main|test|setup] [args...]" >&2; exit 2 ;;
 esac
