@@ -11,6 +11,8 @@ from scipy.spatial.transform import Rotation
 import mani_skill_space  # noqa: F401
 from mani_skill_space.oracles import oracle_for
 from mani_skill_space.oracles.base import CATCH_UP_STEPS, CATCH_UP_TOLERANCE, poses_within
+from mani_skill_space.oracles.insertion import PegInserter, PegTarget
+from mani_skill_space.oracles.peg_in_hole import PEG_IN_HOLE_INSERTION
 from mani_skill_space.oracles.end_effector import (
     ROTATION_SPEED_FRACTION,
     TRANSLATION_SPEED_FRACTION,
@@ -372,3 +374,34 @@ def test_an_arc_round_the_base_asks_for_a_way_round():
     hand = (np.array([0.3, 0.0, 0.3]), np.array([1.0, 0.0, 0.0, 0.0]))
     with pytest.raises(ValueError, match="way must be"):
         arc_round_base(hand, hand, 0, False, (0.05, 0.05))
+
+
+def test_an_arm_the_controller_left_elsewhere_goes_back_to_where_it_started_to_plan_a_grasp(ee_env):
+    """``PegInserter._way_back_to_the_start``: under a TCP controller an arm away from where it started the episode is
+    sent back there, where a plan exists from where the controller leaves it; not in joint control, nor an arm that
+    is there already."""
+    policy = _peg_oracle_in_ee(ee_env)
+    oracle = policy.oracle
+    inserter = PegInserter(oracle, PEG_IN_HOLE_INSERTION)
+    target = PegTarget.of(ee_env.unwrapped, ee_env.unwrapped.peg, 0)
+    end = inserter._end_toward_arm(target)
+    assert inserter._way_back_to_the_start(target, end, []) is None  # there already
+
+    elsewhere = oracle.start_qpos + np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.4, 0.0])
+    for target_qpos in oracle._joint_move_path(oracle.arm_qpos(), elsewhere, 1.0):
+        _send(ee_env, policy, target_qpos)
+    assert np.max(np.abs(oracle.arm_qpos() - oracle.start_qpos)) > 0.3
+    way_back = inserter._way_back_to_the_start(target, end, [])
+    assert way_back is not None
+    for target_qpos in way_back:
+        _send(ee_env, policy, target_qpos)
+    assert np.max(np.abs(oracle.arm_qpos() - oracle.start_qpos)) < 0.1
+
+    follower, oracle.arm_follower = oracle.arm_follower, None  # joint control
+    try:
+        for target_qpos in oracle._joint_move_path(oracle.arm_qpos(), elsewhere, 1.0):
+            _send(ee_env, policy, target_qpos)
+        assert inserter._way_back_to_the_start(target, end, []) is None
+    finally:
+        oracle.arm_follower = follower
+        ee_env.unwrapped.reset(seed=0)

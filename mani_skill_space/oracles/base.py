@@ -145,6 +145,8 @@ class Oracle(Policy):
         self.last_action: Optional[np.ndarray] = None
         self.done = False
         self.failure: Optional[str] = None
+        self.start_qpos = self.arm_qpos().copy()
+        """The arm's joints when the episode started."""
         self.phase = "start"
         """What the plan is doing now (the motion under way, e.g. ``"pre-grasp"``, ``"insert"``): the runners report it
         for an episode that ends before the plan does."""

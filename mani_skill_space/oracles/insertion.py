@@ -137,6 +137,9 @@ SEATED_TIP_HEIGHT = 0.001
 the tip is this close to the bottom (it then eases off to ``RELAXED_HEIGHT`` anyway), not after all the extra steps:
 traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6021), every peg counted as inserted
 12 steps before its push ended."""
+BACK_TO_THE_START_TOLERANCE = 0.1
+"""rad: an arm with every joint this close to where it started the episode is not sent back there to plan a grasp
+(``PegInserter._way_back_to_the_start``)."""
 
 
 @dataclass
@@ -267,7 +270,7 @@ class PegInserter:
         missed: list[sapien.Pose] = []
         while True:
             end = self._end_toward_arm(target)
-            grasp, twist = self._plan_grasp(target, end, missed)
+            grasp, twist = yield from self._plan_grasp_else_from_the_start(target, end, missed)
             grasp_on_peg = _in_frame_of(target.peg, grasp)
             with self._reaching():
                 pre_grasp = backed_off(grasp, PRE_GRASP_DISTANCE)
@@ -285,6 +288,43 @@ class PegInserter:
                         raise
                 yield from self.oracle.set_gripper(GRIPPER_OPEN)
                 yield from self._back_off_the_peg()
+
+    def _plan_grasp_else_from_the_start(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose]) -> Generator[np.ndarray, None, tuple[sapien.Pose, float]]:
+        """``_plan_grasp`` from where the arm is; where that finds no plan under a TCP controller, the arm first goes
+        back to where it started the episode (``_way_back_to_the_start``) and plans from there. The controller's IK
+        settles the arm's redundancy its own way, and joint-space moves can leave the elbow and wrist where no grasp
+        lines the peg up (traced on Solar Panel Assembly, procedural, Moon, seed 6008 in ``pd_ee_delta_pose``: the
+        fourth peg's approach left the arm at (-2.85, -1.53, 1.92, -1.18, 1.39, 1.46, -2.90), from which no plan
+        exists, while one does from the start)."""
+        try:
+            return self._plan_grasp(target, end, missed)
+        except PlanningFailed:
+            way_back = self._way_back_to_the_start(target, end, missed)
+            if way_back is None:
+                raise
+        yield from self.oracle.follow(way_back, "back to the start")
+        return self._plan_grasp(target, end, missed)
+
+    def _way_back_to_the_start(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose]) -> Optional[np.ndarray]:
+        """Under a TCP controller, the joint targets of a free joint-space move from where the arm is to where it
+        started the episode (``Oracle.start_qpos``), if the arm is not there yet, the controller gets there and a
+        plan exists from where it leaves the arm; else None."""
+        oracle = self.oracle
+        now, start = oracle.arm_qpos(), oracle.start_qpos
+        if oracle.arm_follower is None or np.max(np.abs(now - start)) < BACK_TO_THE_START_TOLERANCE:
+            return None
+        with self._reaching():
+            if not oracle.path_is_free(now, start):
+                return None
+            path = oracle._joint_move_path(now, start, 1.0)
+        arrived = oracle.arm_follower(now, path)
+        if arrived is None:
+            return None
+        try:
+            self._plan_grasp(target, end, missed, start=arrived)
+        except PlanningFailed:
+            return None
+        return path
 
     def _back_off_the_peg(self) -> Iterator[np.ndarray]:
         """From a grasp that missed, the open hand back along its approach, else straight up, planned without the
@@ -331,7 +371,7 @@ class PegInserter:
         return 1.0 - cls._tip_height(target, end) / target.depth
 
     # ------------------------------------------------------------------ planning
-    def _plan_grasp(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose] = ()) -> tuple[sapien.Pose, float]:
+    def _plan_grasp(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose] = (), start: Optional[np.ndarray] = None) -> tuple[sapien.Pose, float]:
         """The first grasp (and twist over the hole) for which the whole insertion is feasible from where the arm
         is now: pre-grasp, grasp, lift, the swing over the hole and the straight push to the bottom, and whose push
         keeps ``PUSH_JOINT_MARGIN`` from the joint limits; where no checked grasp's push does, the first feasible
@@ -340,12 +380,13 @@ class PegInserter:
         grasps). The unchecked last resorts are only tried where no checked grasp is feasible: the first of them for which
         the insertion is feasible is taken (with the twist whose push keeps the margin, if one does). Under a TCP
         controller (``_takes_the_quickest_plan``) the quickest plan of each of those groups is taken, not the first.
-        No grasp near one in ``missed`` (in the peg's frame, ``MISSED_GRASP_NEIGHBOURHOOD``) is tried."""
+        No grasp near one in ``missed`` (in the peg's frame, ``MISSED_GRASP_NEIGHBOURHOOD``) is tried. ``start``: the
+        arm's joints to plan from, where the arm is now by default."""
         tip = target.end_frames()[end]
         outward = target.bottom[:3, 3] - self.oracle.solver.base_pose.p
         outward[2] = 0.0
         outward /= np.linalg.norm(outward)
-        start = self.oracle.arm_qpos()
+        start = self.oracle.arm_qpos() if start is None else start
         peg_points = collision_vertices(target.peg)
         grasps = [pose for pose in self._grasp_candidates(target, tip, peg_points) if not _near_any(_in_frame_of(target.peg, pose), missed)]
         # all the checked grasps together (those lifting the peg straight up first, then the others), then each
