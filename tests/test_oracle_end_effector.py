@@ -377,7 +377,7 @@ def test_an_arc_round_the_base_asks_for_a_way_round():
 
 
 def test_an_arm_the_controller_left_elsewhere_goes_back_to_where_it_started_to_plan_a_grasp(ee_env):
-    """``PegInserter._way_back_to_the_start``: under a TCP controller an arm away from where it started the episode is
+    """``PegInserter._goes_back_to_the_start``: under a TCP controller an arm away from where it started the episode is
     sent back there, where a plan exists from where the controller leaves it; not in joint control, nor an arm that
     is there already."""
     policy = _peg_oracle_in_ee(ee_env)
@@ -385,23 +385,22 @@ def test_an_arm_the_controller_left_elsewhere_goes_back_to_where_it_started_to_p
     inserter = PegInserter(oracle, PEG_IN_HOLE_INSERTION)
     target = PegTarget.of(ee_env.unwrapped, ee_env.unwrapped.peg, 0)
     end = inserter._end_toward_arm(target)
-    assert inserter._way_back_to_the_start(target, end, []) is None  # there already
+    assert not inserter._goes_back_to_the_start(target, end, [])  # there already
 
     elsewhere = oracle.start_qpos + np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.4, 0.0])
-    for target_qpos in oracle._joint_move_path(oracle.arm_qpos(), elsewhere, 1.0):
-        _send(ee_env, policy, target_qpos)
+    for action in oracle.joint_move(elsewhere, "away"):
+        _send(ee_env, policy, action[:-1])
     assert np.max(np.abs(oracle.arm_qpos() - oracle.start_qpos)) > 0.3
-    way_back = inserter._way_back_to_the_start(target, end, [])
-    assert way_back is not None
-    for target_qpos in way_back:
-        _send(ee_env, policy, target_qpos)
+    assert inserter._goes_back_to_the_start(target, end, [])
+    for action in oracle.joint_move(oracle.start_qpos, "back to the start"):
+        _send(ee_env, policy, action[:-1])
     assert np.max(np.abs(oracle.arm_qpos() - oracle.start_qpos)) < 0.1
 
     follower, oracle.arm_follower = oracle.arm_follower, None  # joint control
     try:
-        for target_qpos in oracle._joint_move_path(oracle.arm_qpos(), elsewhere, 1.0):
-            _send(ee_env, policy, target_qpos)
-        assert inserter._way_back_to_the_start(target, end, []) is None
+        for action in oracle.joint_move(elsewhere, "away"):
+            _send(ee_env, policy, action[:-1])
+        assert not inserter._goes_back_to_the_start(target, end, [])
     finally:
         oracle.arm_follower = follower
         ee_env.unwrapped.reset(seed=0)

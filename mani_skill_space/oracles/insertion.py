@@ -139,7 +139,7 @@ traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6
 12 steps before its push ended."""
 BACK_TO_THE_START_TOLERANCE = 0.1
 """rad: an arm with every joint this close to where it started the episode is not sent back there to plan a grasp
-(``PegInserter._way_back_to_the_start``)."""
+(``PegInserter._goes_back_to_the_start``)."""
 
 
 @dataclass
@@ -291,7 +291,7 @@ class PegInserter:
 
     def _plan_grasp_else_from_the_start(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose]) -> Generator[np.ndarray, None, tuple[sapien.Pose, float]]:
         """``_plan_grasp`` from where the arm is; where that finds no plan under a TCP controller, the arm first goes
-        back to where it started the episode (``_way_back_to_the_start``) and plans from there. The controller's IK
+        back to where it started the episode (``_goes_back_to_the_start``) and plans from there. The controller's IK
         settles the arm's redundancy its own way, and joint-space moves can leave the elbow and wrist where no grasp
         lines the peg up (traced on Solar Panel Assembly, procedural, Moon, seed 6008 in ``pd_ee_delta_pose``: the
         fourth peg's approach left the arm at (-2.85, -1.53, 1.92, -1.18, 1.39, 1.46, -2.90), from which no plan
@@ -299,32 +299,31 @@ class PegInserter:
         try:
             return self._plan_grasp(target, end, missed)
         except PlanningFailed:
-            way_back = self._way_back_to_the_start(target, end, missed)
-            if way_back is None:
+            if not self._goes_back_to_the_start(target, end, missed):
                 raise
-        yield from self.oracle.follow(way_back, "back to the start")
+        with self._reaching():
+            yield from self.oracle.joint_move(self.oracle.start_qpos, "back to the start")
         return self._plan_grasp(target, end, missed)
 
-    def _way_back_to_the_start(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose]) -> Optional[np.ndarray]:
-        """Under a TCP controller, the joint targets of a free joint-space move from where the arm is to where it
-        started the episode (``Oracle.start_qpos``), if the arm is not there yet, the controller gets there and a
-        plan exists from where it leaves the arm; else None."""
+    def _goes_back_to_the_start(self, target: PegTarget, end: int, missed: Sequence[sapien.Pose]) -> bool:
+        """Whether, under a TCP controller, the arm is to make a joint-space move back to where it started the episode
+        (``Oracle.start_qpos``) to plan a grasp: where it is not there yet, the move is free, the controller gets there
+        and a plan exists from where it leaves the arm."""
         oracle = self.oracle
         now, start = oracle.arm_qpos(), oracle.start_qpos
         if oracle.arm_follower is None or np.max(np.abs(now - start)) < BACK_TO_THE_START_TOLERANCE:
-            return None
+            return False
         with self._reaching():
             if not oracle.path_is_free(now, start):
-                return None
-            path = oracle._joint_move_path(now, start, 1.0)
-        arrived = oracle.arm_follower(now, path)
+                return False
+        arrived = oracle.joint_move_end(now, start)
         if arrived is None:
-            return None
+            return False
         try:
             self._plan_grasp(target, end, missed, start=arrived)
         except PlanningFailed:
-            return None
-        return path
+            return False
+        return True
 
     def _back_off_the_peg(self) -> Iterator[np.ndarray]:
         """From a grasp that missed, the open hand back along its approach, else straight up, planned without the
