@@ -447,6 +447,45 @@ def test_the_quickest_plan_is_taken_among_those_whose_push_keeps_the_margin(pre_
     assert planned_grasps == planned
 
 
+@pytest.mark.parametrize(
+    "joint, straight, margin_asked, chosen",
+    [
+        ((0.3, 100), (0.2, 40), False, "straight"),  # no margin asked (the single peg's): the quicker
+        ((0.02, 30), (0.2, 40), False, "joint"),
+        ((0.3, 100), (0.2, 40), True, "straight"),  # both pushes keep the margin: the quicker
+        ((0.3, 100), (0.05, 40), True, "joint"),  # only the joint-space move's push keeps it
+        ((0.02, 30), (0.05, 40), True, "straight"),  # neither keeps it: the push farther from the limits
+        (None, (0.2, 40), False, "straight"),
+        ((0.3, 100), None, False, "joint"),
+        (None, None, False, None),
+    ],
+)
+def test_under_a_tcp_controller_the_quicker_swing_over_the_hole_is_taken(joint, straight, margin_asked, chosen):
+    """``PegInserter._swing_over`` where the quickest plan is taken: the joint-space move or the straight swing, each
+    (margin of its push, steps); in joint control the straight swing is not planned at all."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.insertion import InsertionSettings, Swing
+
+    joint_arm, straight_arm = np.full(7, 1.0), np.full(7, 2.0)
+    planner = PegInserter.__new__(PegInserter)
+    planner.settings = InsertionSettings(push_margin_under_tcp_control=margin_asked)
+    planner.oracle = SimpleNamespace(tcp_speed_limit=(0.03, 0.03), moves_in_straight_lines=False, joint_move_steps=lambda start, arm: joint[1])
+    planner._insertion_arm = lambda *args: None if joint is None else (joint_arm, joint[0])
+    planner._straight_swing = lambda *args: None if straight is None else (Swing(straight_arm, (np.zeros((straight[1], 7)),)), straight[0])
+    found = planner._swing_over(None, 0.0, np.eye(4), start=np.zeros(7))
+    if chosen is None:
+        assert found is None
+    else:
+        np.testing.assert_array_equal(found[0].arm, joint_arm if chosen == "joint" else straight_arm)
+        assert found[1] == (joint if chosen == "joint" else straight)[0]
+
+    planner.oracle.tcp_speed_limit = None  # joint control
+    planner._straight_swing = lambda *args: pytest.fail("a straight swing planned in joint control")
+    found = planner._swing_over(None, 0.0, np.eye(4), start=np.zeros(7))
+    assert (found is None) if joint is None else np.array_equal(found[0].arm, joint_arm)
+
+
 class _ArmsLeftElsewhere(_ArmsOverTheHole):
     """...whose joint move to arm ``i`` leaves the arm at ``left[i]`` (None: the move stalls), as a TCP controller may."""
 

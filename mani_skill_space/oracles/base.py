@@ -104,7 +104,8 @@ class Oracle(Policy):
     turning and 0.86 m of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion
     stops at the first joint limit its Jacobian steps run into, where the controller's IK, stepped along the line,
     gets round it. Solar Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single
-    peg's did not gain (see the README's *Straight lines of the hand*)."""
+    peg's did not gain (see the README's *Straight lines of the hand*), and only carries a peg over its hole in a
+    straight line where that is quicker (``PegInserter._swing_over``)."""
     free_space_translation_scale: float = 1.0
     """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
     may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
@@ -255,7 +256,7 @@ class Oracle(Policy):
         ``pd_ee_delta_pose``, the tip's 7 cm down to its pre-insert pose, with the lag the swing before had left, took 18
         steps as a screw motion and 12 as the line."""
         if self.line_follower is not None:
-            path = self._hand_line(self.arm_qpos(), pose)
+            path = self.hand_line(self.arm_qpos(), pose)
             if path is not None:
                 self.phase = what
                 yield from self._follow(np.concatenate([path, np.repeat(path[-1:], settle_steps, axis=0)]), retime=False)
@@ -428,9 +429,9 @@ class Oracle(Policy):
         collisions all the way; else None. The hand goes as fast as ``paced`` lets a motion at ``acceleration``."""
         if not self.moves_in_straight_lines:
             return None
-        return self._hand_line(start, pose, acceleration)
+        return self.hand_line(start, pose, acceleration)
 
-    def _hand_line(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+    def hand_line(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """The arm joint targets along which the TCP controller (``line_follower``) takes the hand in a straight line from
         where ``start`` puts it to ``pose``, as fast as ``paced`` lets a motion at ``acceleration``, if it gets there with
         the arm clear of collisions all the way; else None."""
