@@ -526,7 +526,7 @@ class _StraightLinesOverTheHole(_ArmsOverTheHole):
         super().__init__(arms_and_margins)
         self.line_end = line_end
 
-    def straight_line_path(self, start, pose, acceleration=1.0):
+    def hand_line(self, start, pose, acceleration=1.0):
         return None if self.line_end is None else np.repeat(self.line_end[None], 3, axis=0)
 
     def joint_move_end(self, start, goal):
@@ -560,11 +560,11 @@ def test_under_a_tcp_controller_the_peg_swings_over_the_hole_in_straight_lines_w
         assert swing.paths == () and margin == 0.3
     straight_only = planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7), straight_only=True)
     assert (straight_only is None) == (line_margin is None)
-    # planning ahead (no start to swing from) there is no straight line to follow; nor for an oracle that does not
-    # move in straight lines
+    # planning ahead (no start to swing from) there is no straight line to follow; nor for an oracle in joint control
+    # (under a TCP controller, one that does not move in straight lines takes the quicker swing: tested below)
     swing, _ = planner._swing_over(target, 0.0, np.eye(4))
     assert swing.paths == ()
-    oracle.moves_in_straight_lines = False
+    oracle.moves_in_straight_lines, oracle.tcp_speed_limit = False, None
     swing, _ = planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7))
     assert swing.paths == () and planner._swing_over(target, 0.0, np.eye(4), start=np.zeros(7), straight_only=True) is None
 
@@ -812,6 +812,40 @@ def test_without_a_screw_motion_the_hand_takes_its_line_else_the_quicker_of_arc_
         assert path is None
     else:
         assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
+
+
+class _QuickerLines(_PathsWithoutScrew):
+    """``_PathsWithoutScrew`` for an oracle taking the quicker lines: its hand's straight line (``hand_line``) to a pose
+    takes ``hand`` steps (None: it stalls)."""
+
+    MARKERS = {**_PathsWithoutScrew.MARKERS, "hand": 5.0}
+    quicker_lines_under_tcp_control = True
+    line_follower = staticmethod(lambda start, pose, limit: None)
+
+    def hand_line(self, start, pose, acceleration=1.0):
+        return self._path("hand")
+
+
+@pytest.mark.parametrize(
+    "screw, hand, joint, quicker_lines, tcp_control, chosen",
+    [
+        (30, 20, 129, True, True, "hand"),  # the line is quicker than the screw motion
+        (20, 30, 129, True, True, "screw"),
+        (30, None, 129, True, True, "screw"),  # no line: it stalls or collides
+        (None, 20, 129, True, True, "hand"),  # no screw motion: the quicker of the line and the joint move
+        (None, 140, 129, True, True, "joint"),
+        (30, 20, 129, False, True, "screw"),  # an oracle that does not take the quicker lines (the debris', Solar's)
+        (30, 20, 129, True, False, "screw"),  # in joint control
+        (None, 20, 129, True, False, "joint"),
+    ],
+)
+def test_an_oracle_taking_the_quicker_lines_takes_the_hands_line_where_it_is_quicker(screw, hand, joint, quicker_lines, tcp_control, chosen):
+    oracle = _QuickerLines(screw=screw, hand=hand, line=None, arc=None, joint=joint)
+    oracle.quicker_lines_under_tcp_control = quicker_lines
+    if not tcp_control:
+        oracle.line_follower = None
+    path = oracle._motion_path(np.zeros(7), sapien.Pose())
+    assert path[0, 0] == _QuickerLines.MARKERS[chosen]
 
 
 class _RetreatsUp(Oracle):

@@ -106,6 +106,13 @@ class Oracle(Policy):
     gets round it. Solar Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single
     peg's did not gain (see the README's *Straight lines of the hand*), and only carries a peg over its hole in a
     straight line where that is quicker (``PegInserter._swing_over``)."""
+    quicker_lines_under_tcp_control: bool = False
+    """Whether, acting through a TCP controller (``line_follower`` set), the oracle takes the hand's straight line
+    (``hand_line``) instead of mplib's screw motion or a joint-space move wherever the line takes fewer control steps
+    (``_motion_path``). A screw motion turns the hand about a screw axis, and a long turn swings it round a wide helix
+    (procedural peg, Moon, seed 6037: the lift took 19 steps as a screw motion and 9 as the line, and the peg, which
+    had run out of time in the push, was in at step 195). The single peg's oracle does; Solar Panel Assembly's takes
+    straight lines only where there is no screw motion (``straight_lines_under_tcp_control``)."""
     free_space_translation_scale: float = 1.0
     """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
     may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
@@ -330,10 +337,14 @@ class Oracle(Policy):
         lines, the hand's arc round the arm's base instead where that is quicker than the screw (a screw from one side
         of the base to the other folds the arm over rather than turning it round, and the next long motion from there
         must turn the hand about as far: traced on Solar Panel Assembly, Moon, seed 6018, the panel's pre-grasp and
-        swing took 65 and 62 steps); None if there is no motion."""
+        swing took 65 and 62 steps); where the oracle takes the quicker lines (``quicker_lines_under_tcp_control``), the
+        hand's straight line instead where it takes fewer steps than the screw; None if there is no motion."""
         screw = self._screw_path(start, pose)
         if screw is None:
             return self._path_without_screw(start, pose, acceleration)
+        line = self._quicker_line(start, pose, acceleration)
+        if line is not None and len(line) < len(self.paced(screw, start, acceleration)):
+            return line
         if acceleration > 1.0:
             arcs = self.arcs_round_base(start, pose, acceleration)
             if arcs and len(arcs[0]) < len(self.paced(screw, start, acceleration)):
@@ -345,19 +356,28 @@ class Oracle(Policy):
         oracle moves in them (``straight_line_path``); where there is none, the quickest (paced at ``acceleration``) of
         the hand's arc round the arm's base (``arcs_round_base``: from one side of the base to the other, a joint-space
         move may whirl the hand round for 130 steps where the arc takes 40), its path up, across and down
-        (``over_the_top_path``) and the joint-space move to the nearest collision-free IK solution; None if there is
-        none."""
+        (``over_the_top_path``), the hand's straight line where the oracle takes the quicker lines
+        (``quicker_lines_under_tcp_control``) and the joint-space move to the nearest collision-free IK solution; None
+        if there is none."""
         line = self.straight_line_path(start, pose, acceleration)
         if line is not None:
             return line
         goal = self.free_joint_goal(start, pose)
         joint = None if goal is None else self._timed_path(start, goal)  # screw_to paces it
         over_the_top = self.over_the_top_path(start, pose, acceleration)
-        hand_paths = self.arcs_round_base(start, pose, acceleration)[:1] + ([over_the_top] if over_the_top is not None else [])
+        hand_paths = self.arcs_round_base(start, pose, acceleration)[:1]
+        hand_paths += [path for path in (over_the_top, self._quicker_line(start, pose, acceleration)) if path is not None]
         quickest = min(hand_paths, key=len, default=None)
         if quickest is not None and (joint is None or len(quickest) < len(self.paced(joint, start, acceleration))):
             return quickest
         return joint
+
+    def _quicker_line(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
+        """Where the oracle takes the quicker lines (``quicker_lines_under_tcp_control``) under a TCP controller, the
+        hand's straight line from ``start`` to ``pose`` (``hand_line``), for ``_motion_path`` to weigh; else None."""
+        if not self.quicker_lines_under_tcp_control or self.line_follower is None:
+            return None
+        return self.hand_line(start, pose, acceleration)
 
     def over_the_top_path(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
         """Where the oracle moves in straight lines and has a ``via_height``, the arm joint targets that take the hand

@@ -35,6 +35,7 @@ class PegInHoleOracle(Oracle):
     that target, the arm eased off and a pressed peg sprang back out)."""
 
     screw_step = FINE_SCREW_STEP
+    quicker_lines_under_tcp_control = True
 
     def plan(self, env) -> Iterator[np.ndarray]:
         target = PegTarget.of(env, env.peg, 0)
