@@ -111,8 +111,7 @@ class Oracle(Policy):
     (``hand_line``) instead of mplib's screw motion or a joint-space move wherever the line takes fewer control steps
     (``_motion_path``). A screw motion turns the hand about a screw axis, and a long turn swings it round a wide helix
     (procedural peg, Moon, seed 6037: the lift took 19 steps as a screw motion and 9 as the line, and the peg, which
-    had run out of time in the push, was in at step 195). The single peg's oracle does; Solar Panel Assembly's takes
-    straight lines only where there is no screw motion (``straight_lines_under_tcp_control``)."""
+    had run out of time in the push, was in at step 195). The single peg's oracle and Solar Panel Assembly's do."""
     free_space_translation_scale: float = 1.0
     """Under a TCP controller (``tcp_speed_limit`` set), how many times farther than ``tcp_speed_limit`` allows the TCP
     may move in a step in the motions planned at more than the usual joint accelerations (an oracle's brisk free-space
