@@ -834,7 +834,7 @@ class _QuickerLines(_PathsWithoutScrew):
         (30, None, 129, True, True, "screw"),  # no line: it stalls or collides
         (None, 20, 129, True, True, "hand"),  # no screw motion: the quicker of the line and the joint move
         (None, 140, 129, True, True, "joint"),
-        (30, 20, 129, False, True, "screw"),  # an oracle that does not take the quicker lines (the debris', Solar's)
+        (30, 20, 129, False, True, "screw"),  # an oracle that does not take the quicker lines (the debris')
         (30, 20, 129, True, False, "screw"),  # in joint control
         (None, 20, 129, True, False, "joint"),
     ],

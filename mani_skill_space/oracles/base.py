@@ -104,8 +104,8 @@ class Oracle(Policy):
     turning and 0.86 m of travel for a net 1.5 rad and 0.2 m, 122 of the episode's 200 steps); mplib's screw motion
     stops at the first joint limit its Jacobian steps run into, where the controller's IK, stepped along the line,
     gets round it. Solar Panel Assembly's oracle does (its four pegs and panel now fit the 1000 steps); the single
-    peg's did not gain (see the README's *Straight lines of the hand*), and only carries a peg over its hole in a
-    straight line where that is quicker (``PegInserter._swing_over``)."""
+    peg's did not gain (see the README's *Straight lines of the hand*): it takes the hand's line only where that is
+    quicker (``quicker_lines_under_tcp_control``; its swing over the hole, ``PegInserter._swing_over``)."""
     quicker_lines_under_tcp_control: bool = False
     """Whether, acting through a TCP controller (``line_follower`` set), the oracle takes the hand's straight line
     (``hand_line``) instead of mplib's screw motion or a joint-space move wherever the line takes fewer control steps
