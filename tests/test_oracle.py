@@ -848,6 +848,39 @@ def test_an_oracle_taking_the_quicker_lines_takes_the_hands_line_where_it_is_qui
     assert path[0, 0] == _QuickerLines.MARKERS[chosen]
 
 
+class _CountedWork(_QuickerLines):
+    """``_QuickerLines`` for an oracle that also moves in straight lines (Solar Panel Assembly's): its straight line is
+    its hand line, and the hand lines and pacings it computes are counted."""
+
+    straight_lines_under_tcp_control = True
+
+    def __init__(self, **steps):
+        super().__init__(**steps)
+        self.hand_lines = self.pacings = 0
+
+    straight_line_path = Oracle.straight_line_path
+
+    def hand_line(self, start, pose, acceleration=1.0):
+        self.hand_lines += 1
+        return super().hand_line(start, pose, acceleration)
+
+    def paced(self, positions, start=None, acceleration=1.0):
+        self.pacings += 1
+        return positions
+
+
+def test_an_oracle_moving_in_straight_lines_looks_for_the_hands_line_once():
+    oracle = _CountedWork(screw=None, hand=None, line=None, arc=None, joint=129)
+    path = oracle._motion_path(np.zeros(7), sapien.Pose())
+    assert path[0, 0] == _QuickerLines.MARKERS["joint"] and oracle.hand_lines == 1
+
+
+def test_the_screw_motion_is_paced_once_where_a_line_and_an_arc_are_weighed_against_it():
+    oracle = _CountedWork(screw=60, hand=70, line=None, arc=30, joint=None)
+    path = oracle._motion_path(np.zeros(7), sapien.Pose(), 2.0)
+    assert path[0, 0] == _QuickerLines.MARKERS["arc"] and oracle.pacings == 1
+
+
 class _RetreatsUp(Oracle):
     """A stand-in oracle whose hand, at the origin, goes straight up (a screw motion or the TCP controller's line) at
     most ``screw_up`` or ``line_up`` m (None: not at all), and anywhere by a joint move where ``joint``; its motions are

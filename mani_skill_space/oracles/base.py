@@ -341,13 +341,18 @@ class Oracle(Policy):
         screw = self._screw_path(start, pose)
         if screw is None:
             return self._path_without_screw(start, pose, acceleration)
+        screw_steps = None  # pacing the screw is costly: only where something is weighed against it, and once
         line = self._quicker_line(start, pose, acceleration)
-        if line is not None and len(line) < len(self.paced(screw, start, acceleration)):
-            return line
+        if line is not None:
+            screw_steps = len(self.paced(screw, start, acceleration))
+            if len(line) < screw_steps:
+                return line
         if acceleration > 1.0:
             arcs = self.arcs_round_base(start, pose, acceleration)
-            if arcs and len(arcs[0]) < len(self.paced(screw, start, acceleration)):
-                return arcs[0]
+            if arcs:
+                screw_steps = screw_steps if screw_steps is not None else len(self.paced(screw, start, acceleration))
+                if len(arcs[0]) < screw_steps:
+                    return arcs[0]
         return screw
 
     def _path_without_screw(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
@@ -365,7 +370,9 @@ class Oracle(Policy):
         joint = None if goal is None else self._timed_path(start, goal)  # screw_to paces it
         over_the_top = self.over_the_top_path(start, pose, acceleration)
         hand_paths = self.arcs_round_base(start, pose, acceleration)[:1]
-        hand_paths += [path for path in (over_the_top, self._quicker_line(start, pose, acceleration)) if path is not None]
+        # an oracle moving in straight lines has just found no hand line: the same line cannot be quicker
+        quicker_line = None if self.moves_in_straight_lines else self._quicker_line(start, pose, acceleration)
+        hand_paths += [path for path in (over_the_top, quicker_line) if path is not None]
         quickest = min(hand_paths, key=len, default=None)
         if quickest is not None and (joint is None or len(quickest) < len(self.paced(joint, start, acceleration))):
             return quickest
