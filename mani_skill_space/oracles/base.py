@@ -11,6 +11,7 @@ seed gives the same demonstration.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from contextlib import contextmanager
 from typing import Callable, Iterator, Optional
@@ -341,18 +342,15 @@ class Oracle(Policy):
         screw = self._screw_path(start, pose)
         if screw is None:
             return self._path_without_screw(start, pose, acceleration)
-        screw_steps = None  # pacing the screw is costly: only where something is weighed against it, and once
+        # pacing the screw is costly: only where something is weighed against it, and once
+        screw_steps = functools.cache(lambda: len(self.paced(screw, start, acceleration)))
         line = self._quicker_line(start, pose, acceleration)
-        if line is not None:
-            screw_steps = len(self.paced(screw, start, acceleration))
-            if len(line) < screw_steps:
-                return line
+        if line is not None and len(line) < screw_steps():
+            return line
         if acceleration > 1.0:
             arcs = self.arcs_round_base(start, pose, acceleration)
-            if arcs:
-                screw_steps = screw_steps if screw_steps is not None else len(self.paced(screw, start, acceleration))
-                if len(arcs[0]) < screw_steps:
-                    return arcs[0]
+            if arcs and len(arcs[0]) < screw_steps():
+                return arcs[0]
         return screw
 
     def _path_without_screw(self, start: np.ndarray, pose: sapien.Pose, acceleration: float = 1.0) -> Optional[np.ndarray]:
