@@ -23,8 +23,8 @@ import numpy as np
 import trimesh
 
 from mani_skill_space.kwarg_checks import KwargError
-from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart
-from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex
+from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, solid_difference
+from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex_meshes
 
 CIRCLE_SIDES = 32
 """A circular profile's polygon: 64 hull vertices, within PhysX's GPU limit for convex meshes."""
@@ -158,13 +158,13 @@ def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: f
     entrance = np.array([0.0, 0.0, MODULE_HEIGHT]) + offset
     cavity = centred + offset
     block = _box_vertices()
-    pieces = subtract_convex(block, cavity)
-    solid = trimesh.boolean.difference([convex_mesh(block), convex_mesh(cavity)], engine="manifold")
+    pieces = subtract_convex_meshes(block, cavity)
+    solid = solid_difference(convex_mesh(block), convex_mesh(cavity))
     axis = rotation[:, 2]
     return Asset(
         name="hole_module",
         visual_parts=(VisualPart(solid, MODULE_COLOR, roughness=0.6, metallic=0.4),),
-        collision_parts=tuple(CollisionPart(convex_mesh(p)) for p in pieces),
+        collision_parts=tuple(CollisionPart(piece) for piece in pieces),
         friction=METAL_FRICTION,
         frames={"entrance": _frame(rotation, entrance), "bottom": _frame(rotation, entrance - depth * axis)},
         info={"depth": depth, "clearance": clearance, "symmetry_order": profile.symmetry_order, "module_size": [2 * MODULE_HALF_SIZE] * 2 + [MODULE_HEIGHT]},

@@ -45,15 +45,6 @@ def hull_vertices(points: np.ndarray) -> np.ndarray:
         return np.empty((0, points.shape[1]))
 
 
-def volume(vertices: np.ndarray) -> float:
-    if len(vertices) < 4:
-        return 0.0
-    try:
-        return float(ConvexHull(vertices).volume)
-    except (QhullError, ValueError):
-        return 0.0
-
-
 def face_planes(vertices: np.ndarray) -> list[tuple[np.ndarray, float]]:
     """Outward unit normal n and offset c of each face plane of ``hull(vertices)``: the hull is n . x <= c."""
     hull = ConvexHull(vertices)
@@ -63,20 +54,42 @@ def face_planes(vertices: np.ndarray) -> list[tuple[np.ndarray, float]]:
 
 def subtract_convex(solid: np.ndarray, cavity: np.ndarray) -> list[np.ndarray]:
     """Convex pieces (vertex sets) exactly covering ``hull(solid)`` outside ``hull(cavity)``."""
+    return [piece for piece, _ in _pieces_with_hulls(solid, cavity)]
+
+
+def subtract_convex_meshes(solid: np.ndarray, cavity: np.ndarray) -> list[trimesh.Trimesh]:
+    """``subtract_convex``'s pieces as meshes (``convex_mesh`` of each), each hull computed once."""
+    return [_mesh_of_hull(hull) for _, hull in _pieces_with_hulls(solid, cavity)]
+
+
+def _pieces_with_hulls(solid: np.ndarray, cavity: np.ndarray) -> list[tuple[np.ndarray, ConvexHull]]:
     pieces, remaining = [], solid
     for normal, offset in face_planes(cavity):
         piece = clip(remaining, -normal, -offset)  # the part beyond this face of the cavity
-        if volume(piece) > MIN_PIECE_VOLUME:
-            pieces.append(piece)
+        hull = _hull_or_none(piece)
+        if hull is not None and hull.volume > MIN_PIECE_VOLUME:
+            pieces.append((piece, hull))
         remaining = clip(remaining, normal, offset)
         if len(remaining) == 0:
             break
     return pieces
 
 
+def _hull_or_none(vertices: np.ndarray) -> ConvexHull | None:
+    if len(vertices) < 4:
+        return None
+    try:
+        return ConvexHull(vertices)
+    except (QhullError, ValueError):
+        return None
+
+
 def convex_mesh(vertices: np.ndarray) -> trimesh.Trimesh:
     """The hull of ``vertices`` as a closed, outward-wound mesh (faster than trimesh's general hull repair)."""
-    hull = ConvexHull(vertices)
+    return _mesh_of_hull(ConvexHull(vertices))
+
+
+def _mesh_of_hull(hull: ConvexHull) -> trimesh.Trimesh:
     faces = hull.simplices.copy()
     a, b, c = (hull.points[faces[:, i]] for i in range(3))
     inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0

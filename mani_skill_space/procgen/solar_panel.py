@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, translation_frame
+from mani_skill_space.procgen.asset import Asset, CollisionPart, VisualPart, box_mesh, solid_difference, solid_union, translation_frame
 from mani_skill_space.procgen.peg_hole import (
     BORE_EXTENSION,
     DEFAULT_CLEARANCE,
@@ -35,7 +35,7 @@ from mani_skill_space.procgen.peg_hole import (
     make_peg,
     peg_points,
 )
-from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex
+from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex_meshes
 
 SEAT_HEIGHT = 0.28
 """Height (m) above the ground of the inserted pegs' tops, where the panel's plate comes to rest."""
@@ -181,8 +181,8 @@ def make_socket_base(layout: SolarLayout) -> Asset:
         bottom, top_z = frames[f"bottom_{i}"][:3, 3], frames[f"entrance_{i}"][2, 3]
         post = np.array([[x + sx * POST_HALF_WIDTH, y + sy * POST_HALF_WIDTH, z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, top_z)])
         cavity = _bore_points(layout) + bottom
-        collision += [CollisionPart(convex_mesh(p)) for p in subtract_convex(post, cavity)]
-        visual.append(trimesh.boolean.difference([convex_mesh(post), convex_mesh(cavity)], engine="manifold"))
+        collision += [CollisionPart(piece) for piece in subtract_convex_meshes(post, cavity)]
+        visual.append(solid_difference(convex_mesh(post), convex_mesh(cavity)))
     return Asset(
         name="socket_base",
         visual_parts=tuple(VisualPart(m, MODULE_COLOR, roughness=0.6, metallic=0.4) for m in visual),
@@ -215,7 +215,7 @@ def make_panel(layout: SolarLayout, name: str = "solar_panel") -> Asset:
     ]
     walls = [w for x, y in layout.socket_xy for w in _receptacle_walls(x, y, layout.circumradius + RECEPTACLE_PLAY)]
     frame_parts = [plate, bar, *standoffs, *walls]
-    solid = trimesh.boolean.union(frame_parts, engine="manifold")
+    solid = solid_union(frame_parts)
     com = solid.center_mass
     for mesh in [solid, cells, *frame_parts]:
         mesh.apply_translation(-com)

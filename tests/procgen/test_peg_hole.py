@@ -18,7 +18,7 @@ from mani_skill_space.procgen.peg_hole import (
     peg_points,
     sample_profile,
 )
-from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex
+from mani_skill_space.procgen.polytope import convex_mesh, subtract_convex, subtract_convex_meshes
 
 SEEDS = range(20)
 
@@ -79,6 +79,22 @@ def test_no_piece_enters_the_bore():
     for piece in pieces:
         assert (bore ^ _manifold(convex_mesh(piece))).volume() < 1e-12
     assert sum(convex_mesh(p).volume for p in pieces) == pytest.approx(convex_mesh(block).volume - (bore ^ _manifold(convex_mesh(block))).volume(), rel=1e-6)
+
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_pieces_as_meshes_are_the_hulls_of_the_pieces_exactly(seed):
+    """``subtract_convex_meshes`` reuses the hull that sized each piece; the meshes must be ``convex_mesh``'s to the bit
+    (the env's collision geometry, and the arm-planning verdicts cached under it, depend on them)."""
+    profile = sample_profile(np.random.default_rng(seed))
+    cavity = peg_points(profile, grow=0.001, extend=0.3, bore=True) + np.array([0.01, -0.02, 0.05])
+    block = np.array([[x, y, z] for x in (-0.075, 0.075) for y in (-0.075, 0.075) for z in (0.0, 0.12)])
+    meshes = subtract_convex_meshes(block, cavity)
+    pieces = subtract_convex(block, cavity)
+    assert len(meshes) == len(pieces) > 4
+    for mesh, piece in zip(meshes, pieces):
+        expected = convex_mesh(piece)
+        assert np.array_equal(mesh.vertices, expected.vertices) and np.array_equal(mesh.faces, expected.faces)
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 import trimesh
-from scipy.spatial import Delaunay
+from scipy.spatial import ConvexHull, Delaunay
 from scipy.spatial.transform import Rotation
 
 from mani_skill_space.dataset import load_dataset_object
-from mani_skill_space.procgen.resting import resting_orientations
+from mani_skill_space.procgen.resting import _distance_inside_polygon, resting_orientations
 from mani_skill_space.procgen.rock import make_rock
 
 
@@ -47,3 +47,24 @@ def test_without_a_face_that_stable_the_most_stable_face_is_used():
     near_a_corner = (0.024, 0.024, 0.024)  # every face's margin is 1 mm, below the 2 mm asked for
     assert len(resting_orientations(cube, centre_of_mass=near_a_corner)) == 1
     assert len(resting_orientations(cube, centre_of_mass=near_a_corner, margin=0.0005)) == 6
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_distance_inside_a_face_is_the_least_over_its_edges_in_any_vertex_order(seed):
+    """A face's corners come in no particular order; the polygon they make is walked counter-clockwise, as a 2-D hull
+    of them would, and the point's distance to it is the nearest edge's (negative outside)."""
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    u = np.cross(normal, rng.normal(size=3))
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    flat = rng.normal(size=(12, 2)) * rng.uniform(0.01, 0.05, 2)
+    corners = flat[ConvexHull(flat).vertices]  # counter-clockwise
+    point_flat = rng.normal(size=2) * 0.02
+    edges = np.roll(corners, -1, axis=0) - corners
+    expected = np.min((edges[:, 0] * (corners[:, 1] - point_flat[1]) * -1 + edges[:, 1] * (corners[:, 0] - point_flat[0])) / np.linalg.norm(edges, axis=1))
+    offset = rng.normal(size=3)
+    polygon = offset + corners[rng.permutation(len(corners))] @ np.stack([u, v])
+    point = offset + point_flat @ np.stack([u, v])
+    assert _distance_inside_polygon(point, polygon, normal) == pytest.approx(expected, abs=1e-12)
