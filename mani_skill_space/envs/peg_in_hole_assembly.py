@@ -30,7 +30,7 @@ from mani_skill_space.envs.insertion import (
 from mani_skill_space.geometry import relative_pose, rotation_6d, rotation_matrix
 from mani_skill_space.procgen.asset import Asset
 from mani_skill_space.procgen.mounts import make_rover, make_station
-from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import build_hole_module, peg_and_hole_layout
 from mani_skill_space.rewards import RewardTable
 
 MODULE_POSITION = (0.7, 0.0, 0.0)
@@ -73,11 +73,13 @@ def reachable_peg_hole_pair(
     module = np.eye(4)
     module[:3, 3] = module_position
     for draw in range(MAX_PAIR_DRAWS):
-        peg, hole = make_peg_hole_pair(redrawn_seed(seed, draw), clearance)
-        bottom = module @ hole.frames["bottom"]
+        peg, layout = peg_and_hole_layout(redrawn_seed(seed, draw), clearance)
+        bottom = module @ layout.bottom
         if arm is None:
             checks = face_checks_of(peg, bottom, arm_base)
+            hole = build_hole_module(layout) if bool(checks["insertable"].any()) else None  # cut only what is kept
         else:
+            hole = build_hole_module(layout)
             obstacles = module_obstacles(hole, module, float(peg.info["radius"]))
             if arm.extra_obstacles is not None:
                 obstacles = np.concatenate([arm.extra_obstacles, obstacles])

@@ -145,8 +145,27 @@ def make_peg(profile: PegProfile, name: str = "peg") -> Asset:
     )
 
 
-def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: float = DEFAULT_CLEARANCE) -> Asset:
-    """The module block (origin at the centre of its base) with a bore for ``profile``."""
+@dataclass(frozen=True)
+class HoleLayout:
+    """Where a module's bore goes (all that ``make_hole_module`` draws), before the block is cut: cheap, so that a
+    pair's solvability checks can turn it down without cutting a module (``build_hole_module``)."""
+
+    rotation: np.ndarray
+    depth: float
+    entrance: np.ndarray
+    cavity: np.ndarray
+    """The bore's convex solid in the module's frame."""
+    clearance: float
+    symmetry_order: int
+
+    @property
+    def bottom(self) -> np.ndarray:
+        """The bore floor's frame (the module's ``bottom`` frame)."""
+        return _frame(self.rotation, self.entrance - self.depth * self.rotation[:, 2])
+
+
+def hole_layout(profile: PegProfile, rng: np.random.Generator, clearance: float = DEFAULT_CLEARANCE) -> HoleLayout:
+    """The bore's tilt, depth and offset for ``profile``, drawn from ``rng``."""
     clearance = check_clearance(clearance)
     rotation = _tilt_rotation(rng)
     depth = _hole_depth(rng, profile)
@@ -156,19 +175,30 @@ def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: f
     low, high = _offset_range(centred)
     offset = np.array([rng.uniform(low[0], high[0]), rng.uniform(low[1], high[1]), 0.0])
     entrance = np.array([0.0, 0.0, MODULE_HEIGHT]) + offset
-    cavity = centred + offset
+    return HoleLayout(rotation, depth, entrance, centred + offset, clearance, profile.symmetry_order)
+
+
+def build_hole_module(layout: HoleLayout) -> Asset:
+    """The module block (origin at the centre of its base) with the bore of ``layout`` cut into it."""
     block = _box_vertices()
-    pieces = subtract_convex_meshes(block, cavity)
-    solid = solid_difference(convex_mesh(block), convex_mesh(cavity))
-    axis = rotation[:, 2]
     return Asset(
         name="hole_module",
-        visual_parts=(VisualPart(solid, MODULE_COLOR, roughness=0.6, metallic=0.4),),
-        collision_parts=tuple(CollisionPart(piece) for piece in pieces),
+        visual_parts=(VisualPart(solid_difference(convex_mesh(block), convex_mesh(layout.cavity)), MODULE_COLOR, roughness=0.6, metallic=0.4),),
+        collision_parts=tuple(CollisionPart(piece) for piece in subtract_convex_meshes(block, layout.cavity)),
         friction=METAL_FRICTION,
-        frames={"entrance": _frame(rotation, entrance), "bottom": _frame(rotation, entrance - depth * axis)},
-        info={"depth": depth, "clearance": clearance, "symmetry_order": profile.symmetry_order, "module_size": [2 * MODULE_HALF_SIZE] * 2 + [MODULE_HEIGHT]},
+        frames={"entrance": _frame(layout.rotation, layout.entrance), "bottom": layout.bottom},
+        info={
+            "depth": layout.depth,
+            "clearance": layout.clearance,
+            "symmetry_order": layout.symmetry_order,
+            "module_size": [2 * MODULE_HALF_SIZE] * 2 + [MODULE_HEIGHT],
+        },
     )
+
+
+def make_hole_module(profile: PegProfile, rng: np.random.Generator, clearance: float = DEFAULT_CLEARANCE) -> Asset:
+    """The module block (origin at the centre of its base) with a bore for ``profile``."""
+    return build_hole_module(hole_layout(profile, rng, clearance))
 
 
 def check_clearance(clearance: float, maximum: float = MAX_CLEARANCE, limited_by: str = f"every procedural hole module keeps {MIN_WALL * 1000:g} mm walls") -> float:
@@ -194,9 +224,15 @@ def bore_fits(profile: PegProfile, rotation: np.ndarray, depth: float, clearance
 
 
 def make_peg_hole_pair(seed: int, clearance: float = DEFAULT_CLEARANCE) -> tuple[Asset, Asset]:
+    peg, layout = peg_and_hole_layout(seed, clearance)
+    return peg, build_hole_module(layout)
+
+
+def peg_and_hole_layout(seed: int, clearance: float = DEFAULT_CLEARANCE) -> tuple[Asset, HoleLayout]:
+    """``make_peg_hole_pair``'s peg and its hole's layout (``build_hole_module`` cuts the module)."""
     rng = np.random.default_rng(int(seed))
     profile = sample_profile(rng)
-    return make_peg(profile, name=f"peg_{seed}"), make_hole_module(profile, rng, clearance)
+    return make_peg(profile, name=f"peg_{seed}"), hole_layout(profile, rng, clearance)
 
 
 def _hole_depth(rng: np.random.Generator, profile: PegProfile) -> float:

@@ -10,7 +10,7 @@ from mani_skill.utils.geometry.rotation_conversions import quaternion_to_matrix
 from mani_skill_space.envs.insertion import MIN_GRIP_HEIGHT, grippable_faces, insertable_faces, peg_placement, reachable_faces
 from mani_skill_space.envs.peg_in_hole_assembly import PROCEDURAL_MODULE_POSITION, reachable_peg_hole_pair
 from mani_skill_space.procgen.mounts import make_rover
-from mani_skill_space.procgen.peg_hole import make_peg_hole_pair
+from mani_skill_space.procgen.peg_hole import build_hole_module, make_peg_hole_pair
 
 ARM_BASE = torch.as_tensor(make_rover().frames["arm_mount"][:3, 3], dtype=torch.float32)
 
@@ -119,6 +119,22 @@ def test_every_procedural_pair_has_an_insertable_face_and_records_its_checks():
         if record["draws"] == 1:
             assert peg.name == make_peg_hole_pair(seed)[0].name  # a pair that passes is the seed's own
 
+
+
+def test_a_pair_the_checks_turn_down_has_no_module_cut_and_the_kept_one_is_its_draws_own(monkeypatch):
+    """Cutting the module is most of a pair's cost: only the draw that passes the sim-free checks is cut."""
+    import mani_skill_space.envs.peg_in_hole_assembly as task
+    from mani_skill_space.envs.insertion import redrawn_seed
+
+    cut = []
+    monkeypatch.setattr(task, "build_hole_module", lambda layout: cut.append(layout) or build_hole_module(layout))
+    seed = 25  # turned down once: its first draw has no insertable face
+    peg, hole = reachable_peg_hole_pair(seed, 0.001, ARM_BASE.numpy())
+    assert hole.info["feasibility"]["draws"] == 2 and len(cut) == 1
+    own_peg, own_hole = make_peg_hole_pair(redrawn_seed(seed, 1))
+    assert peg.name == own_peg.name
+    assert all(np.array_equal(a.mesh.vertices, b.mesh.vertices) for a, b in zip(hole.collision_parts, own_hole.collision_parts))
+    assert len(hole.collision_parts) == len(own_hole.collision_parts)
 
 def test_every_procedural_solar_set_has_an_insertable_face_for_each_peg():
     from mani_skill.agents.robots.panda.panda import Panda
