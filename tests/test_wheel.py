@@ -5,6 +5,7 @@ source."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -44,12 +45,29 @@ CHECK = textwrap.dedent(
 )
 
 
+SOURCE_TREE = ("mani_skill_space", "assets", "tasks", "setup.py", "setup.cfg", "pyproject.toml", "README.md")
+"""What the build reads: the package folders (``PACKAGE_FOLDERS``) and the files that declare the package."""
+
+
 @pytest.fixture(scope="session")
 def wheel(tmp_path_factory) -> Path:
-    dist = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(dist), str(REPO)], check=True, capture_output=True)
+    """Built from a copy of the source tree, so that the build neither writes into the repo (setuptools' ``build/`` and
+    ``egg-info``) nor reads it while the other pytest worker writes its ``__pycache__`` there."""
+    source, dist = tmp_path_factory.mktemp("source"), tmp_path_factory.mktemp("dist")
+    for name in SOURCE_TREE:
+        if (REPO / name).is_dir():
+            shutil.copytree(REPO / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(REPO / name, source / name)
+    _checked([sys.executable, "-m", "build", "--wheel", "--outdir", dist, source])
     (built,) = dist.glob("mani_skill_space-*.whl")
     return built
+
+
+def _checked(command: list) -> None:
+    """Run a set-up command; if it fails, the assertion carries the end of its output."""
+    result = subprocess.run([str(part) for part in command], capture_output=True, text=True)
+    assert result.returncode == 0, f"{' '.join(map(str, command))} exited {result.returncode}:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
 
 
 @pytest.fixture(scope="session")
@@ -59,8 +77,8 @@ def installed(wheel, tmp_path_factory) -> Path:
     assert not venv.is_relative_to(REPO)
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
     pip = [str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "-c", str(REPO / "constraints.txt")]
-    subprocess.run(pip + ["torch==2.13.0"], check=True, capture_output=True)
-    subprocess.run(pip + [str(wheel)], check=True, capture_output=True)
+    _checked(pip + ["torch==2.13.0"])
+    _checked(pip + [wheel])
     return venv / "bin"
 
 

@@ -103,7 +103,8 @@ def box_mesh(half_size, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
 
 def solid_difference(solid: trimesh.Trimesh, cavity: trimesh.Trimesh) -> trimesh.Trimesh:
     """``solid`` minus ``cavity`` with manifold3d, for meshes closed and outward-wound by construction (convex hulls,
-    boxes): trimesh's check that each input is a volume, about a third of such an operation's time, is skipped."""
+    boxes): trimesh's check that each input is a volume is skipped (it took about two thirds of a hole module's cut:
+    1.4-1.6 ms with it, 0.45 ms without)."""
     return trimesh.boolean.difference([solid, cavity], engine="manifold", check_volume=False)
 
 

@@ -120,7 +120,6 @@ def test_every_procedural_pair_has_an_insertable_face_and_records_its_checks():
             assert peg.name == make_peg_hole_pair(seed)[0].name  # a pair that passes is the seed's own
 
 
-
 def test_a_pair_the_checks_turn_down_has_no_module_cut_and_the_kept_one_is_its_draws_own(monkeypatch):
     """Cutting the module is most of a pair's cost: only the draw that passes the sim-free checks is cut."""
     import mani_skill_space.envs.peg_in_hole_assembly as task
