@@ -220,6 +220,30 @@ def test_a_peg_let_go_has_stayed_in_only_if_it_is_still_in_its_hole(fraction, of
     assert stayed_in(env, 1) is stayed
 
 
+def test_a_standing_pegs_obstacle_points_cover_its_edges_and_corners_at_the_margin():
+    """A finger brushing a standing peg's top edge must meet an obstacle point: points pushed out along each face's
+    normal leave the margin open there (their nearest to the rounded edge is 0.77 margins away), the grown part's
+    points cover it, and none stands nearer the peg than the margin (less the ball's facets)."""
+    import trimesh
+
+    from mani_skill_space.oracles.base import inflated_surface_points, surface_points
+    from mani_skill_space.procgen.asset import Asset, CollisionPart
+
+    half, margin, spacing = np.array([0.01, 0.01, 0.05]), 0.02, 0.005
+    peg = Asset("peg", (), (CollisionPart(trimesh.creation.box(extents=2 * half)),))
+    grown, pushed = inflated_surface_points(peg, margin=margin, spacing=spacing), surface_points(peg, margin=margin, spacing=spacing)
+
+    outside = np.linalg.norm(np.maximum(np.abs(grown) - half, 0.0), axis=1)  # each point's distance to the box
+    assert outside.min() >= 0.98 * margin and outside.max() <= margin + 1e-9
+
+    diagonal = margin / np.sqrt(2)
+    top_edges = [np.array([sx * (half[0] + diagonal), t * half[1], half[2] + diagonal]) for sx in (-1, 1) for t in np.linspace(-1, 1, 5)]
+    top_corners = [np.append(np.array([sx, sy]) * (half[:2] + margin / np.sqrt(3)), half[2] + margin / np.sqrt(3)) for sx in (-1, 1) for sy in (-1, 1)]
+    for query in top_edges + top_corners:
+        assert np.linalg.norm(grown - query, axis=1).min() <= spacing, query
+    assert max(np.linalg.norm(pushed - query, axis=1).min() for query in top_edges) > 0.7 * margin
+
+
 PAD = np.array([[-0.01, -0.01], [0.01, 0.01]])
 
 

@@ -863,6 +863,25 @@ def _surface_points(asset, rng: np.random.Generator, margin: float = 0.0, spacin
     return np.concatenate(samples)
 
 
+def inflated_surface_points(asset, pose: np.ndarray = np.eye(4), margin: float = 0.01, spacing: float = 0.005) -> np.ndarray:
+    """Obstacle points on each collision part of an asset grown by ``margin`` in every direction (its hull swept by a
+    ball of that radius), about ``spacing`` apart, placed at ``pose`` (world frame). ``surface_points``' points pushed
+    out along each face's normal leave the margin open along the part's edges, and a finger brushing a standing peg's
+    top edge passes there (traced on Solar Panel Assembly, Moon, reference assets, seed 64005: the planned move to the
+    second peg's pre-grasp pose ran a fingertip 6 mm from the first peg's axis, and knocked it out of its socket)."""
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=2).vertices * margin
+    rng = np.random.default_rng(0)
+    samples = []
+    for part in asset.collision_parts:
+        grown = trimesh.convex.convex_hull((np.asarray(part.mesh.vertices)[:, None] + ball[None]).reshape(-1, 3))
+        count = max(SURFACE_POINTS_PER_PART, int(grown.area / spacing**2))
+        samples.append(trimesh.sample.sample_surface(grown, count, seed=rng)[0])
+    points = np.concatenate(samples)
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
 class _ServicerArmSolver(PandaArmMotionPlanningSolver):
     """ManiSkill's Panda planner for the arm on a free-flying servicer: it plans the arm alone (its own description,
     without the bus link) from the bus's pose (``Oracle._plan_from_the_base_now``)."""

@@ -30,7 +30,6 @@ from mani_skill_space.envs.insertion import SIDE_TOLERANCE
 from mani_skill_space.oracles.base import (
     GRIPPER_CLOSED,
     GRIPPER_OPEN,
-    POINT_SPACING,
     GraspMissed,
     Oracle,
     PlanningFailed,
@@ -38,6 +37,7 @@ from mani_skill_space.oracles.base import (
     backed_off,
     collision_vertices,
     finger_pad_rectangle,
+    inflated_surface_points,
     lowest_point,
     open_finger_corners,
     pad_overlap,
@@ -756,10 +756,12 @@ class PegInserter:
         return sapien.Pose(tip_goal @ np.linalg.inv(tip_in_tcp))
 
 
-PEG_MARGIN = 0.01
-"""The arm keeps about this far (m) from the pegs already standing in their holes, sampled this densely: at the
-usual 2 cm spacing an open finger can pass between two points on a standing peg's top and knock it out of its
-socket. (Not around the pegs still lying on the deck: the hand must reach between them.)"""
+PEG_MARGIN = 0.02
+"""The arm keeps about this far (m) from the pegs already standing in their holes, edges and corners included
+(``inflated_surface_points``). (Not around the pegs still lying on the deck: the hand must reach between them.)"""
+STANDING_PEG_SPACING = 0.005
+"""The standing pegs' obstacle points this far apart: at the usual 2 cm spacing an open finger can pass between two
+points on a standing peg's top and knock it out of its socket."""
 
 
 def stayed_in(env, peg: int) -> bool:
@@ -787,9 +789,11 @@ def other_pegs(pegs: list, peg_assets: list, held: int, standing, poses: Optiona
     points = []
     for i, peg in enumerate(pegs):
         if i != held:
-            margin = (PEG_MARGIN, PEG_MARGIN) if i in standing else (0.0, POINT_SPACING)
             for pose in poses.get(i, [peg.pose.sp.to_transformation_matrix()]):
-                points.append(surface_points(peg_assets[i], pose, *margin))
+                if i in standing:
+                    points.append(inflated_surface_points(peg_assets[i], pose, PEG_MARGIN, STANDING_PEG_SPACING))
+                else:
+                    points.append(surface_points(peg_assets[i], pose))
     return np.concatenate(points)
 
 
