@@ -11,6 +11,7 @@ seed gives the same demonstration.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 from contextlib import contextmanager
@@ -871,15 +872,11 @@ def inflated_surface_points(asset, pose: np.ndarray = np.eye(4), margin: float =
     second peg's pre-grasp pose ran a fingertip 6 mm from the first peg's axis, and knocked it out of its socket)."""
     import trimesh
 
+    from mani_skill_space.procgen.asset import CollisionPart
+
     ball = trimesh.creation.icosphere(subdivisions=2).vertices * margin
-    rng = np.random.default_rng(0)
-    samples = []
-    for part in asset.collision_parts:
-        grown = trimesh.convex.convex_hull((np.asarray(part.mesh.vertices)[:, None] + ball[None]).reshape(-1, 3))
-        count = max(SURFACE_POINTS_PER_PART, int(grown.area / spacing**2))
-        samples.append(trimesh.sample.sample_surface(grown, count, seed=rng)[0])
-    points = np.concatenate(samples)
-    return points @ pose[:3, :3].T + pose[:3, 3]
+    grown = tuple(CollisionPart(trimesh.convex.convex_hull((np.asarray(part.mesh.vertices)[:, None] + ball[None]).reshape(-1, 3))) for part in asset.collision_parts)
+    return surface_points(dataclasses.replace(asset, collision_parts=grown), pose, spacing=spacing)
 
 
 class _ServicerArmSolver(PandaArmMotionPlanningSolver):

@@ -789,11 +789,8 @@ def other_pegs(pegs: list, peg_assets: list, held: int, standing, poses: Optiona
     points = []
     for i, peg in enumerate(pegs):
         if i != held:
-            for pose in poses.get(i, [peg.pose.sp.to_transformation_matrix()]):
-                if i in standing:
-                    points.append(inflated_surface_points(peg_assets[i], pose, PEG_MARGIN, STANDING_PEG_SPACING))
-                else:
-                    points.append(surface_points(peg_assets[i], pose))
+            in_peg = inflated_surface_points(peg_assets[i], margin=PEG_MARGIN, spacing=STANDING_PEG_SPACING) if i in standing else surface_points(peg_assets[i])
+            points += [in_peg @ pose[:3, :3].T + pose[:3, 3] for pose in poses.get(i, [peg.pose.sp.to_transformation_matrix()])]
     return np.concatenate(points)
 
 
