@@ -1037,6 +1037,59 @@ def test_a_brisk_motion_goes_round_the_base_where_that_is_quicker_than_its_screw
     assert path[0, 0] == _PathsWithoutScrew.MARKERS[chosen]
 
 
+class _TrailingArm(Oracle):
+    """A stand-in oracle in joint control whose arm closes ``closing`` of the way to its last joint target each step
+    (``step``), and whose planner has a motion only from within 0.01 rad of the joints ``free_from``."""
+
+    def __init__(self, arm, last_target, free_from, closing: float):
+        import torch
+        from types import SimpleNamespace
+
+        self.arm = SimpleNamespace(qpos=torch.tensor([arm], dtype=torch.float64))
+        self.env = SimpleNamespace(agent=SimpleNamespace(controller=SimpleNamespace(controllers={"arm": self.arm})))
+        self.solver = SimpleNamespace(planner=SimpleNamespace(joint_vel_limits=np.ones(7), joint_acc_limits=np.ones(7)))
+        self.gripper, self.free_from, self.closing = 1.0, np.asarray(free_from), closing
+        self.last_action = np.hstack([last_target, self.gripper]).astype(np.float32)
+
+    def _motion_path(self, start, pose, acceleration=1.0):
+        return np.full((3, 7), 9.0) if np.abs(start - self.free_from).max() < 0.01 else None
+
+    def step(self, action):
+        import torch
+
+        self.last_action = action
+        now = self.arm.qpos[0]
+        self.arm.qpos = (now + self.closing * (torch.as_tensor(action[:7], dtype=torch.float64) - now))[None]
+
+
+def _screw_to_actions(oracle):
+    actions = []
+    try:
+        for action in oracle.screw_to(sapien.Pose(), "grasp"):
+            actions.append(action)
+            oracle.step(action)
+    except PlanningFailed:
+        return actions, False
+    return actions, True
+
+
+def test_a_motion_with_no_plan_from_a_trailing_arm_is_planned_again_once_the_arm_is_at_its_target():
+    from mani_skill_space.oracles.base import SETTLE_MOST_STEPS
+
+    target = np.full(7, 0.5)
+    # 0.04 rad behind the target it was sent (Solar Panel Assembly, Earth, seed 64021), from where there is no motion:
+    # the target is held until the arm is there, and the motion planned from there
+    trailing = _TrailingArm(target - 0.04, target, free_from=target, closing=0.5)
+    actions, moved = _screw_to_actions(trailing)
+    held = [action for action in actions if np.allclose(action[:7], target)]
+    assert moved and 1 <= len(held) < SETTLE_MOST_STEPS
+    assert np.allclose(actions[len(held)][:7], 9.0) and len(actions) == len(held) + 3
+    # an arm already at its target, or one that never gets there, still finds no motion: at once, or after holding
+    assert _screw_to_actions(_TrailingArm(target, target, free_from=target + 1.0, closing=0.5)) == ([], False)
+    stuck, moved = _screw_to_actions(_TrailingArm(target - 0.04, target, free_from=target, closing=0.0))
+    assert not moved and len(stuck) == SETTLE_MOST_STEPS
+
+
 class _ClosingFingers:
     """A stub env for ``Oracle.wait_for_grasp``: the arm still, the fingers closing ``closing`` metres a step until
     ``grasped_after`` steps, when the grasp holds (never, for None)."""
