@@ -1090,6 +1090,55 @@ def test_a_motion_with_no_plan_from_a_trailing_arm_is_planned_again_once_the_arm
     assert not moved and len(stuck) == SETTLE_MOST_STEPS
 
 
+def _push_in_with_line_ups_failing(failures: int, arm_trails: bool):
+    """Drives ``PegInserter._push_in`` with stand-ins whose first ``failures`` line-ups find nothing and whose arm does
+    (``arm_trails``) or does not trail its last target: (what was done, the actions sent, the twist or None if it
+    failed)."""
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    log = []
+
+    class Settling:
+        def settle(self):
+            log.append("settle")
+            if arm_trails:
+                yield "hold"
+            return arm_trails
+
+        @contextmanager
+        def obstacles_only(self, choose):
+            yield
+
+    def line_up(target, end, twist):
+        log.append("line-up")
+        if log.count("line-up") <= failures:
+            raise PlanningFailed("the peg moved in the hand: no arm configuration lines it up with the hole any more")
+        return "swing", 1.5
+
+    inserter = PegInserter.__new__(PegInserter)
+    inserter.oracle, inserter.settings, inserter.reach_obstacles = Settling(), InsertionSettings(), None
+    inserter._line_up = line_up
+    inserter._carry_over = lambda swing: iter([f"carry {swing}"])
+    inserter._lower_in = lambda target, end, twist: iter([f"lower at {twist}"])
+    actions, pushing = [], inserter._push_in(None, 0, 0.0, line_up=True)
+    try:
+        while True:
+            actions.append(next(pushing))
+    except StopIteration as done:
+        return log, actions, done.value
+    except PlanningFailed:
+        return log, actions, None
+
+
+def test_a_line_up_not_found_from_a_trailing_arm_is_sought_again_once_the_arm_has_settled():
+    assert _push_in_with_line_ups_failing(0, arm_trails=True) == (["line-up"], ["carry swing", "lower at 1.5"], 1.5)
+    # the lift left the arm trailing (Solar Panel Assembly, Earth, seed 64047): settled, the line-up is found
+    assert _push_in_with_line_ups_failing(1, arm_trails=True) == (["line-up", "settle", "line-up"], ["hold", "carry swing", "lower at 1.5"], 1.5)
+    # an arm already at its target, or a line-up that is not found from there either, ends the plan
+    assert _push_in_with_line_ups_failing(1, arm_trails=False) == (["line-up", "settle"], [], None)
+    assert _push_in_with_line_ups_failing(2, arm_trails=True) == (["line-up", "settle", "line-up"], ["hold"], None)
+
+
 class _ClosingFingers:
     """A stub env for ``Oracle.wait_for_grasp``: the arm still, the fingers closing ``closing`` metres a step until
     ``grasped_after`` steps, when the grasp holds (never, for None)."""

@@ -252,7 +252,7 @@ class Oracle(Policy):
         from where the arm is: the plan was checked from where the motion before ends, and the arm trails its targets
         (traced on Solar Panel Assembly, procedural, Earth, seed 64021: 0.04 rad behind at the end of the brisk move to
         the third peg's pre-grasp pose, from where the straight way in to the grasp ran into an obstacle; from the
-        target itself it did not)."""
+        target itself it did not). The insertions' line-up over the hole does the same (``PegInserter._push_in``)."""
         if self.last_action is None:
             return False
         target, held = self.last_action[: len(self.arm_qpos())], False

@@ -335,10 +335,18 @@ class PegInserter:
             yield from self.oracle.first_reachable(away, "backing off the peg")
 
     def _push_in(self, target: PegTarget, end: int, twist: float, line_up: bool) -> Generator[np.ndarray, None, float]:
-        """Line the peg up over the hole (if ``line_up``) and push it in; returns the twist it went in with."""
+        """Line the peg up over the hole (if ``line_up``) and push it in; returns the twist it went in with. Where no
+        line-up is found from where the arm is, it is sought again once the arm has settled on its last target
+        (``Oracle.settle``): the lift ends with the arm trailing it (Solar Panel Assembly, Earth, procedural, tuning
+        seed 64047: no line-up for the last peg from where the lift left the arm, one once it had settled)."""
         if line_up:
             with self._reaching():
-                swing, twist = self._line_up(target, end, twist)
+                try:
+                    swing, twist = self._line_up(target, end, twist)
+                except PlanningFailed:
+                    if not (yield from self.oracle.settle()):
+                        raise
+                    swing, twist = self._line_up(target, end, twist)
                 yield from self._carry_over(swing)
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             yield from self._lower_in(target, end, twist)
