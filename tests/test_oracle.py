@@ -1045,7 +1045,7 @@ class _TrailingArm(Oracle):
         import torch
         from types import SimpleNamespace
 
-        self.arm = SimpleNamespace(qpos=torch.tensor([arm], dtype=torch.float64))
+        self.arm = SimpleNamespace(qpos=torch.tensor(np.asarray(arm)[None], dtype=torch.float64))
         self.env = SimpleNamespace(agent=SimpleNamespace(controller=SimpleNamespace(controllers={"arm": self.arm})))
         self.solver = SimpleNamespace(planner=SimpleNamespace(joint_vel_limits=np.ones(7), joint_acc_limits=np.ones(7)))
         self.gripper, self.free_from, self.closing = 1.0, np.asarray(free_from), closing

@@ -236,11 +236,9 @@ class Oracle(Policy):
         for correction in range(1 + corrections):
             if correction and np.linalg.norm(self.tcp_pose().p - pose.p) < FREE_FLYER_TOLERANCE:
                 break
-            with self._speed(speed, acceleration):
-                positions = self._motion_path(self.arm_qpos(), pose, acceleration)
+            positions = self._planned_motion(self.arm_qpos(), pose, acceleration, speed)
             if positions is None and (yield from self.settle()):
-                with self._speed(speed, acceleration):
-                    positions = self._motion_path(self.arm_qpos(), pose, acceleration)
+                positions = self._planned_motion(self.arm_qpos(), pose, acceleration, speed)
             if positions is None:
                 raise PlanningFailed(f"no motion to the {what} pose")
             yield from self._follow(self.paced(positions, acceleration=acceleration), retime=False)
@@ -255,13 +253,17 @@ class Oracle(Policy):
         target itself it did not). The insertions' line-up over the hole does the same (``PegInserter._push_in``)."""
         if self.last_action is None:
             return False
-        target, held = self.last_action[: len(self.arm_qpos())], False
-        for _ in range(most_steps):
-            if np.abs(self.arm_qpos() - target).max() <= SETTLE_TOLERANCE:
-                break
-            held = True
+        target = self.last_action[: len(self.arm_qpos())]
+        return (yield from self._hold_last_action(lambda: np.abs(self.arm_qpos() - target).max() <= SETTLE_TOLERANCE, most_steps))
+
+    def _hold_last_action(self, arrived: Callable[[], bool], most_steps: int) -> Generator[np.ndarray, None, bool]:
+        """Send the last action again until ``arrived()`` (checked before each step), at most ``most_steps`` steps;
+        returns whether it sent any."""
+        for step in range(most_steps):
+            if arrived():
+                return step > 0
             yield self.last_action
-        return held
+        return most_steps > 0
 
     def catch_up(self, pose: sapien.Pose, most_steps: int = CATCH_UP_STEPS) -> Iterator[np.ndarray]:
         """Acting through a TCP controller (``tcp_speed_limit`` set), hold the last target sent until the hand is within
@@ -272,12 +274,12 @@ class Oracle(Policy):
         of it, and the joint-space move taken instead whirled the hand 2.2 m round for 79 steps."""
         if self.tcp_speed_limit is None or self.last_action is None:
             return
-        goal = (pose.p, pose.q)
-        for _ in range(most_steps):
+
+        def hand_there() -> bool:
             hand = self.tcp_pose()
-            if poses_within((hand.p, hand.q), goal, CATCH_UP_TOLERANCE):
-                return
-            yield self.last_action
+            return poses_within((hand.p, hand.q), (pose.p, pose.q), CATCH_UP_TOLERANCE)
+
+        yield from self._hold_last_action(hand_there, most_steps)
 
     def line_to(self, pose: sapien.Pose, what: str, settle_steps: int = 0) -> Iterator[np.ndarray]:
         """Under a TCP controller (``line_follower`` set), the hand in a straight line to ``pose`` at the oracle's speed
@@ -462,8 +464,10 @@ class Oracle(Policy):
         path = self._planned_motion(start, pose, acceleration)
         return None if path is None else len(self.paced(path, start, acceleration))
 
-    def _planned_motion(self, start: np.ndarray, pose: sapien.Pose, acceleration: float) -> Optional[np.ndarray]:
-        with self._speed(1.0, acceleration):
+    def _planned_motion(self, start: np.ndarray, pose: sapien.Pose, acceleration: float, speed: float = 1.0) -> Optional[np.ndarray]:
+        """``_motion_path`` planned at ``speed`` times the usual joint limits (and ``acceleration`` times the usual
+        accelerations, on top)."""
+        with self._speed(speed, acceleration):
             return self._motion_path(start, pose, acceleration)
 
     def screw_end(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
