@@ -540,6 +540,65 @@ def test_the_push_is_planned_from_where_the_move_over_the_hole_leaves_the_arm(in
     np.testing.assert_array_equal(planner._insertion_arm(target, 0.0, np.eye(4))[0], arms[0])
 
 
+class _ArmsSweepingTheHeldPeg(_ArmsOverTheHole):
+    """...whose joint move to arm ``i`` sweeps the held box into an obstacle where ``sweeps[i]``; it records the
+    obstacles each check was given."""
+
+    def __init__(self, arms_and_margins, sweeps):
+        super().__init__(arms_and_margins)
+        self.sweeps = {float(arm[0]): sweep for arm, sweep in zip(self.arms, sweeps)}
+        self.obstacles_in_use = np.array([[0.0, 0.0, 0.05], [0.3, 0.0, 0.05]])  # on the hole's axis, and far from it
+        self.checked_against = []
+
+    def path_keeps_held_box_clear(self, start, goal, box_in_tcp, half_extents, obstacles=None):
+        self.checked_against.append(obstacles)
+        return not self.sweeps[float(goal[0])]
+
+    def joint_move_end(self, start, goal):
+        return goal
+
+
+@pytest.mark.parametrize("keeps_clear, chosen", [(True, 1), (False, 0)])
+def test_a_swing_over_the_hole_keeps_the_held_peg_clear_where_the_settings_ask(inserter, keeps_clear, chosen):
+    """Solar Panel Assembly, Earth, procedural, tuning seed 64064: the joint-space swing dipped the hand, and the peg
+    hanging from it struck the arm's mount and turned 40 degrees in the grip (the planner does not see it). Where the
+    settings ask, an arm whose swing sweeps the held peg's box into an obstacle is not moved to; the check leaves out
+    the obstacles round the hole's entrance, where the swing brings the peg's tip."""
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    arms = [np.full(7, float(i)) for i in range(2)]
+    planner = PegInserter.__new__(PegInserter)
+    oracle = _ArmsSweepingTheHeldPeg(list(zip(arms, (0.3, 0.3))), sweeps=(True, False))
+    planner.oracle, planner.planned_arm = oracle, None
+    planner.settings = InsertionSettings(swing_keeps_held_peg_clear=keeps_clear)
+    target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
+    held_box = planner._held_peg_box(target, np.eye(4))
+    assert (held_box is not None) is keeps_clear
+    found = planner._insertion_arm(target, 0.0, np.eye(4), start=np.zeros(7), held_box=held_box)
+    np.testing.assert_array_equal(found[0], arms[chosen])
+    if keeps_clear:
+        np.testing.assert_array_equal(oracle.checked_against[0], [[0.3, 0.0, 0.05]])
+    else:
+        assert oracle.checked_against == []
+
+
+def test_the_held_pegs_box_holds_the_peg_where_the_hand_holds_it(inserter):
+    """``PegInserter._held_peg_box``, carried by a hand at any pose, holds every collision vertex of the peg where it is
+    now at least ``HELD_PEG_MARGIN`` inside its faces, and reaches just that margin beyond the peg on each of its axes."""
+    from mani_skill_space.oracles.base import collision_vertices
+    from mani_skill_space.oracles.insertion import HELD_PEG_MARGIN, InsertionSettings
+
+    planner = PegInserter.__new__(PegInserter)
+    planner.settings = InsertionSettings(swing_keeps_held_peg_clear=True)
+    target = _peg_target(inserter.oracle.env)
+    hand = sapien.Pose(p=[0.1, -0.2, 0.4], q=Rotation.from_rotvec([0.3, 2.0, -0.5]).as_quat()[[3, 0, 1, 2]]).to_transformation_matrix()
+    box_in_tcp, half_extents = planner._held_peg_box(target, hand)
+    box = hand @ box_in_tcp
+    in_box = np.abs((collision_vertices(target.peg) - box[:3, 3]) @ box[:3, :3])
+    assert np.all(in_box <= half_extents - HELD_PEG_MARGIN + 1e-6)
+    np.testing.assert_allclose(in_box.max(axis=0), half_extents - HELD_PEG_MARGIN, atol=1e-6)
+
+
 class _StraightLinesOverTheHole(_ArmsOverTheHole):
     """...acting through a TCP controller, whose straight lines of the hand end at ``line_end`` (None: they stall)."""
 

@@ -661,11 +661,18 @@ class Oracle(Policy):
                 return False
         return True
 
-    def path_keeps_held_box_clear(self, start: np.ndarray, goal: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray, samples: int = 20) -> bool:
+    @property
+    def obstacles_in_use(self) -> np.ndarray:
+        """The planner's obstacle points now (world frame)."""
+        return self._obstacles_in_use
+
+    def path_keeps_held_box_clear(
+        self, start: np.ndarray, goal: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray, samples: int = 20, obstacles: Optional[np.ndarray] = None
+    ) -> bool:
         """Whether a box held in the hand (its 4x4 pose in the TCP frame and its half extents) stays clear of the
-        planner's obstacle points along the straight joint move from ``start`` to ``goal``. (mplib's attached objects
-        would do this, but mplib 0.1.1 places them as if the arm's base stood at the origin.)"""
-        obstacles = self._obstacles_in_use
+        planner's obstacle points (or of ``obstacles``) along the straight joint move from ``start`` to ``goal``.
+        (mplib's attached objects would do this, but mplib 0.1.1 places them as if the arm's base stood at the origin.)"""
+        obstacles = self._obstacles_in_use if obstacles is None else obstacles
         for position, rotation in zip(*self.tcp_path(start, goal, self._path_samples(start, goal, samples))):
             box = np.eye(4)
             box[:3, :3], box[:3, 3] = rotation.as_matrix(), position

@@ -115,6 +115,9 @@ AXIS_KEEPOUT = 0.04
 the planner's obstacles: the fingers holding the peg come that close to it."""
 KEEPOUT_BELOW_ENTRANCE = 0.01
 """...down to this far below the entrance (the fingers hold the peg above it)."""
+HELD_PEG_MARGIN = 0.01
+"""How far (m) a joint-space swing keeps the held peg's bounding box from the obstacle points (about half their spacing,
+so that a thin peg cannot pass between two of them), where the settings ask (``swing_keeps_held_peg_clear``)."""
 STILL_IN_FRACTION = 0.8
 """How far in (of its hole's depth) a peg let go must still be to count as having stayed in (``stayed_in``)."""
 PUSH_JOINT_MARGIN = 0.15
@@ -204,6 +207,9 @@ class InsertionSettings:
     oracle's usual ones, of the held peg's lift and of the straight line that carries it over the hole at the lift
     height (``_straight_swing``): at more than 1 the hand moves ``Oracle.free_space_translation_scale`` times farther a
     step there. The line down to the entrance keeps the usual pace, and so does every motion in joint control."""
+    swing_keeps_held_peg_clear: bool = False
+    """Whether the joint-space swing over the hole must keep the held peg's box (``PegInserter._held_peg_box``) clear of the
+    planner's obstacles (except round the hole's entrance): the planner sees the arm, not the peg hanging from the hand."""
     push_margin_under_tcp_control: bool = False
     """Whether an oracle acting through a TCP controller (``pd_ee_delta_pose``) also prefers pushes that keep
     ``PUSH_JOINT_MARGIN`` from the joint limits (``PegInserter.push_joint_margin``)."""
@@ -482,6 +488,7 @@ class PegInserter:
             if lifted is None:
                 continue
             tip_in_hand = _tip_in_hand(grasp, tip)
+            held_box = self._held_peg_box(target, grasp.to_transformation_matrix())
             grip_half_width = _grip_half_width(grasp, peg_points)
             hand_over_hole = lambda twist: _frame_holding_tip_over_hole(target, twist, tip_in_hand, depth)  # noqa: E731
             # the hand pointing down and away from the arm first
@@ -492,7 +499,7 @@ class PegInserter:
                 if checked and not self._fingers_clear_surface(target, pressed, grip_half_width):
                     continue
                 with self._reaching(), self.oracle.fingers_planned_at(holding):
-                    found = self._swing_over(target, twist, tip_in_hand, start=lifted, straight_only=straight_swing)
+                    found = self._swing_over(target, twist, tip_in_hand, start=lifted, straight_only=straight_swing, held_box=held_box)
                 if found is not None:
                     yield (found[0], grasp, float(twist), lifted), found[1]
 
@@ -554,6 +561,7 @@ class PegInserter:
         over the hole; the margin is that of the push planned); where none keeps the margin, the first feasible
         one in that order. (The fingers' clearance round the hole is not checked again here.)"""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
+        held_box = self._held_peg_box(target, self.oracle.tcp_pose().to_transformation_matrix())
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
 
         def line_ups() -> Iterator[tuple[tuple[np.ndarray, float], float]]:
@@ -562,7 +570,7 @@ class PegInserter:
             for approach_gap in LINE_UP_GAPS:
                 for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth):
                     for candidate in twists:
-                        found = self._swing_over(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap)
+                        found = self._swing_over(target, candidate, tip_in_hand, start=self.oracle.arm_qpos(), push_to=push_to, approach_gap=approach_gap, held_box=held_box)
                         if found is not None:
                             yield (found[0], float(candidate)), found[1]
 
@@ -586,6 +594,7 @@ class PegInserter:
         push_to: float = -PRESS_DEPTH,
         approach_gap: float = APPROACH_GAP,
         straight_only: bool = False,
+        held_box: Optional[tuple[np.ndarray, np.ndarray]] = None,
     ) -> Optional[tuple[Swing, float]]:
         """How to carry the peg (``tip_in_hand``) from ``start`` to ``approach_gap`` over the hole at ``twist``, with the
         margin of the push from there (as ``_insertion_arm``): where the oracle moves in straight lines, the straight swing
@@ -596,14 +605,15 @@ class PegInserter:
         those whose push keeps the margin, else whichever push keeps farther from the limits: the controller takes the
         hand along the whole whirl of a joint-space move (procedural peg, Moon, seed 6046 in ``pd_ee_delta_pose``: 100
         steps and 3.8 rad of turning to carry the peg 0.19 m and turn it 2.65 rad, and the push ran out of time; the
-        straight swing took 40)."""
+        straight swing took 40). ``held_box``: the held peg's box (``PegInserter._held_peg_box``), which the joint-space move keeps clear of
+        the obstacles where the settings ask (``swing_keeps_held_peg_clear``)."""
         quickest = start is not None and self._takes_the_quickest_plan
         straight = None
         if start is not None and (getattr(self.oracle, "moves_in_straight_lines", False) or quickest):
             straight = self._straight_swing(target, twist, tip_in_hand, start, push_to, approach_gap)
         if straight_only or (not quickest and straight is not None and straight[1] >= self.push_joint_margin):
             return straight
-        found = self._insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap)
+        found = self._insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap, held_box)
         joint = None if found is None else (Swing(found[0]), found[1])
         if quickest:
             keeping = [swing for swing in (joint, straight) if swing is not None and swing[1] >= self.push_joint_margin]
@@ -635,7 +645,14 @@ class PegInserter:
         return sapien.Pose(_frame_holding_tip_over_hole(target, twist, tip_in_hand, height))
 
     def _insertion_arm(
-        self, target: PegTarget, twist, tip_in_hand, start: Optional[np.ndarray] = None, push_to: float = -PRESS_DEPTH, approach_gap: float = APPROACH_GAP
+        self,
+        target: PegTarget,
+        twist,
+        tip_in_hand,
+        start: Optional[np.ndarray] = None,
+        push_to: float = -PRESS_DEPTH,
+        approach_gap: float = APPROACH_GAP,
+        held_box: Optional[tuple[np.ndarray, np.ndarray]] = None,
     ) -> Optional[tuple[np.ndarray, float]]:
         """An arm configuration holding the tip ``approach_gap`` over the hole on its axis (with ``tip_in_hand``) from which a
         straight push reaches ``push_to`` above the bottom (just past it by default), and (given ``start``) a straight joint move reaches it,
@@ -647,7 +664,7 @@ class PegInserter:
         solutions = self.oracle.ik_solutions(over)
         if self.planned_arm is not None:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
-        arms = [arm for arm in solutions if start is None or self.oracle.path_is_free(start, arm)]
+        arms = [arm for arm in solutions if start is None or (self.oracle.path_is_free(start, arm) and self._keeps_held_peg_clear(target, start, arm, held_box))]
         best = None
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             for arm in arms:
@@ -662,6 +679,26 @@ class PegInserter:
                 if best is None or margin > best[1]:
                     best = (arm, margin)
         return best
+
+    def _held_peg_box(self, target: PegTarget, hand: np.ndarray) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """The peg's bounding box in its own frame, grown by ``HELD_PEG_MARGIN``, as the hand at ``hand`` (world, 4 x 4)
+        holds the peg where it is now: its pose in the TCP frame and its half extents (``Oracle.path_keeps_held_box_clear``);
+        None where the settings do not ask for it (``swing_keeps_held_peg_clear``)."""
+        if not self.settings.swing_keeps_held_peg_clear:
+            return None
+        peg = target.peg.pose.sp.to_transformation_matrix()
+        in_peg = (collision_vertices(target.peg) - peg[:3, 3]) @ peg[:3, :3]
+        low, high = in_peg.min(axis=0), in_peg.max(axis=0)
+        box_in_peg = np.eye(4)
+        box_in_peg[:3, 3] = (low + high) / 2
+        return np.linalg.inv(hand) @ peg @ box_in_peg, (high - low) / 2 + HELD_PEG_MARGIN
+
+    def _keeps_held_peg_clear(self, target: PegTarget, start: np.ndarray, arm: np.ndarray, held_box: Optional[tuple[np.ndarray, np.ndarray]]) -> bool:
+        """Whether the straight joint move from ``start`` to ``arm`` keeps ``held_box`` clear of the obstacles outside the
+        hole's keep-out (where the swing ends, the peg's tip over the entrance); True where there is no box to keep clear."""
+        if held_box is None:
+            return True
+        return self.oracle.path_keeps_held_box_clear(start, arm, *held_box, obstacles=outside_keepout(self.oracle.obstacles_in_use, target))
 
     def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> list[sapien.Pose]:
         """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp

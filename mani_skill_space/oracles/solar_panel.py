@@ -56,7 +56,7 @@ PLACE_PRESS = 0.004
 
 PEG_INSERTION = InsertionSettings(
     lift_height=PEG_LIFT_HEIGHT, relax_steps=6, insert_attempts=2, insert_step=0.004, refine_passes=1, pre_grasp_acceleration=FREE_SPACE_ACCELERATION,
-    push_margin_under_tcp_control=True, carry_acceleration_under_tcp_control=FREE_SPACE_ACCELERATION,
+    push_margin_under_tcp_control=True, carry_acceleration_under_tcp_control=FREE_SPACE_ACCELERATION, swing_keeps_held_peg_clear=True,
 )
 """Four pegs and a panel in 50 s: a little brisker than Peg-in-Hole's single peg; the push eases off before
 letting go (in orbit a peg let go while pressed into its socket springs back out of it), and a jammed push is
