@@ -821,14 +821,14 @@ class _HandAtRest:
 def test_the_line_up_prefers_a_push_clear_of_the_joint_limits_then_the_first_feasible(inserter, margins, chosen):
     """``_line_up`` tries the twists nearest the planned one in each of its tiers (approach gap x push depth); the first
     whose push keeps PUSH_JOINT_MARGIN wins, else the first feasible one."""
-    from mani_skill_space.oracles.insertion import ENOUGH_DEPTH_LEFT, LINE_UP_GAPS, PRESS_DEPTH, PegInserter
+    from mani_skill_space.oracles.insertion import ENOUGH_DEPTH_LEFT, LINE_UP_GAPS, PRESS_DEPTH, InsertionSettings, PegInserter
 
     target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04, symmetry=4, end_frames=lambda: np.stack([np.eye(4)] * 2))
     tiers = [(gap, push_to) for gap in LINE_UP_GAPS for push_to in (-PRESS_DEPTH, ENOUGH_DEPTH_LEFT * target.depth)]
     planner = PegInserter.__new__(PegInserter)
-    planner.oracle = _HandAtRest()
+    planner.oracle, planner.settings = _HandAtRest(), InsertionSettings()
 
-    def insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap):
+    def insertion_arm(target, twist, tip_in_hand, start, push_to, approach_gap, held_box):
         if margins is None:
             return None
         key = (int(round(twist / (np.pi / 2))) % 4, tiers.index((approach_gap, push_to)))

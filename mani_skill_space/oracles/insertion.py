@@ -115,9 +115,11 @@ AXIS_KEEPOUT = 0.04
 the planner's obstacles: the fingers holding the peg come that close to it."""
 KEEPOUT_BELOW_ENTRANCE = 0.01
 """...down to this far below the entrance (the fingers hold the peg above it)."""
-HELD_PEG_MARGIN = 0.01
-"""How far (m) a joint-space swing keeps the held peg's bounding box from the obstacle points (about half their spacing,
-so that a thin peg cannot pass between two of them), where the settings ask (``swing_keeps_held_peg_clear``)."""
+HELD_PEG_MARGIN = 0.005
+"""How far (m) a joint-space swing keeps the held peg's bounding box from the obstacle points, where the settings ask
+(``swing_keeps_held_peg_clear``): grown by this, a box at least 1 cm across is wider than the obstacle points' 2 cm
+spacing and cannot pass between two of them. (At 1 cm, on Solar Panel Assembly, orbit, procedural, seed 64019, every
+grasp whose lift goes straight up lost its swing: the peg passes within 1 cm of the socket base's side.)"""
 STILL_IN_FRACTION = 0.8
 """How far in (of its hole's depth) a peg let go must still be to count as having stayed in (``stayed_in``)."""
 PUSH_JOINT_MARGIN = 0.15
@@ -664,7 +666,7 @@ class PegInserter:
         solutions = self.oracle.ik_solutions(over)
         if self.planned_arm is not None:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
-        arms = [arm for arm in solutions if start is None or (self.oracle.path_is_free(start, arm) and self._keeps_held_peg_clear(target, start, arm, held_box))]
+        arms = [arm for arm in solutions if start is None or self.oracle.path_is_free(start, arm)]
         best = None
         with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
             for arm in arms:
@@ -674,10 +676,14 @@ class PegInserter:
                 margin = self.oracle.screw_limit_margin(reached, pressed)
                 if margin is None:
                     continue
-                if margin >= self.push_joint_margin:
+                keeps_margin = margin >= self.push_joint_margin
+                if not keeps_margin and best is not None and margin <= best[1]:
+                    continue
+                if start is not None and not self._keeps_held_peg_clear(target, start, arm, held_box):  # checked last: the dearest
+                    continue
+                if keeps_margin:
                     return arm, margin
-                if best is None or margin > best[1]:
-                    best = (arm, margin)
+                best = (arm, margin)
         return best
 
     def _held_peg_box(self, target: PegTarget, hand: np.ndarray) -> Optional[tuple[np.ndarray, np.ndarray]]:
