@@ -150,17 +150,37 @@ class SolarPanelOracle(Oracle):
         yield from self.servo(lambda step: raised(start, min(PANEL_LIFTS[0], (step + 1) * PANEL_SERVO_LIFT_STEP)), steps + SETTLE_STEPS, "panel lift")
 
     def _panel_grasp(self, env) -> sapien.Pose:
-        """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches."""
+        """The hand straight down over the bar's centre, closing across it, whichever way round the arm reaches: the first
+        way round from whose pre-grasp pose the hand comes straight down to the bar (``_comes_straight_down_to``), else
+        the first the arm reaches at all. The panel is not among the planner's obstacles, and where there is no straight
+        way down the joint-space move whirls the hand round into it (traced on Earth, procedural, tuning seed 64075: the
+        pre-grasp pose left the wrist at its joint limit, the move down swung the hand 20 cm aside and back, and it
+        knocked the panel 5 cm along the mount before the fingers closed)."""
         handle = env.panel_handle()[0].cpu().numpy().astype(np.float64)
         across = handle[:3, 0] * [1.0, 1.0, 0.0]  # level, even if the panel was knocked askew
         if np.linalg.norm(across) < PANEL_LEVEL_ACROSS:
             raise PlanningFailed("the panel's bar stands on end: there is no grasp from above")
         across /= np.linalg.norm(across)
+        reached = []
         for sign in (1.0, -1.0):
             pose = env.agent.build_grasp_pose(np.array([0.0, 0.0, -1.0]), sign * across, handle[:3, 3])
             if self.ik_solutions(pose) and self.ik_solutions(backed_off(pose, PANEL_PRE_GRASP)):
-                return pose
+                if self._comes_straight_down_to(pose):
+                    return pose
+                reached.append(pose)
+        if reached:
+            return reached[0]
         raise PlanningFailed("the arm cannot reach down to the panel's bar")
+
+    def _comes_straight_down_to(self, grasp: sapien.Pose) -> bool:
+        """Whether, from where the move to the panel's pre-grasp pose leaves the arm (the first of ``PANEL_PRE_GRASPS`` it
+        reaches from where the arm is, as ``place_panel`` goes), the hand comes down to ``grasp`` in a straight line."""
+        start = self.arm_qpos()
+        for distance in PANEL_PRE_GRASPS:
+            arm = self.motion_end(start, backed_off(grasp, distance), FREE_SPACE_ACCELERATION)
+            if arm is not None:
+                return self.straight_motion_exists(arm, grasp)
+        return False
 
     def _swing_over_target(self, env) -> Iterator[np.ndarray]:
         """The panel swung high above its seat (the first of SWING_GAPS, either way round, that the arm reaches with the
