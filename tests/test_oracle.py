@@ -732,6 +732,72 @@ def test_a_box_held_in_the_hand_is_checked_where_the_arm_carries_it(inserter):
         assert oracle.path_keeps_held_box_clear(start, turned(-1.0), box, large)
 
 
+class _PanelWaysRound:
+    """A stand-in Solar Panel oracle and scene: the panel's bar along x, the arm's IK reaching the grasps closing
+    along +x and -x (``reaches``) and the hand coming straight down to each (``straight``), by the closing's sign."""
+
+    def __init__(self, reaches, straight):
+        from types import SimpleNamespace
+
+        import torch
+
+        from mani_skill_space.oracles.solar_panel import SolarPanelOracle
+
+        self.oracle = SolarPanelOracle.__new__(SolarPanelOracle)
+        sign = lambda pose: 1.0 if pose.p[0] > 0 else -1.0  # noqa: E731
+        self.oracle.ik_solutions = lambda pose, near=None: [np.zeros(7)] if reaches[sign(pose)] else []
+        self.oracle._comes_straight_down_to = lambda grasp: straight[sign(grasp)]
+        # the grasp pose's x is the closing's sign: the pre-grasp pose, backed off along its approach, keeps it
+        build = lambda approach, closing, centre: sapien.Pose(p=[closing[0], 0.0, 0.3])  # noqa: E731
+        self.env = SimpleNamespace(agent=SimpleNamespace(build_grasp_pose=build), panel_handle=lambda: torch.eye(4)[None])
+
+
+@pytest.mark.parametrize(
+    "reaches, straight, chosen",
+    [
+        ((True, True), (True, True), 1.0),  # the first way round
+        ((True, True), (False, True), -1.0),  # the first from which the hand comes straight down
+        ((True, True), (False, False), 1.0),  # neither: the first the arm reaches, as before
+        ((False, True), (True, False), -1.0),  # the only one the arm reaches
+        ((False, False), (True, True), None),
+    ],
+)
+def test_the_panel_is_grasped_the_first_way_round_from_which_the_hand_comes_straight_down(reaches, straight, chosen):
+    """Solar Panel Assembly, Earth, procedural, tuning seed 64075: from the first way round's pre-grasp pose there was
+    no straight way down (the wrist at its limit), the joint-space move whirled the hand into the panel and the grasp
+    missed; the other way round comes straight down."""
+    ways = _PanelWaysRound(dict(zip((1.0, -1.0), reaches)), dict(zip((1.0, -1.0), straight)))
+    if chosen is None:
+        with pytest.raises(PlanningFailed, match="cannot reach down to the panel's bar"):
+            ways.oracle._panel_grasp(ways.env)
+        return
+    assert ways.oracle._panel_grasp(ways.env).p[0] == chosen
+
+
+@pytest.mark.parametrize("pre_grasp_reached, straight_from", [((True, True), 0), ((False, True), 1), ((False, False), None)])
+def test_the_way_down_to_the_panel_is_checked_from_where_its_pre_grasp_move_leaves_the_arm(pre_grasp_reached, straight_from):
+    """``SolarPanelOracle._comes_straight_down_to`` checks the straight way down from where the move to the first of
+    ``PANEL_PRE_GRASPS`` that the arm reaches (as ``place_panel``'s ``first_reachable``) leaves it, at the brisk pace."""
+    from mani_skill_space.oracles.solar_panel import FREE_SPACE_ACCELERATION, PANEL_PRE_GRASPS, SolarPanelOracle
+
+    oracle = SolarPanelOracle.__new__(SolarPanelOracle)
+    grasp = sapien.Pose(p=[0.3, 0.0, 0.2], q=[0.0, 1.0, 0.0, 0.0])  # pointing down: backed off is straight up
+    oracle.arm_qpos = lambda: np.zeros(7)
+    heights = [round(0.2 + distance, 6) for distance in PANEL_PRE_GRASPS]
+    accelerations, checked_from = [], []
+
+    def motion_end(start, pose, acceleration):
+        accelerations.append(acceleration)
+        index = heights.index(round(float(pose.p[2]), 6))
+        return np.full(7, float(index)) if pre_grasp_reached[index] else None
+
+    oracle.motion_end = motion_end
+    oracle.straight_motion_exists = lambda start, pose: checked_from.append(int(start[0])) or True
+    assert oracle._comes_straight_down_to(grasp) is (straight_from is not None)
+    assert checked_from == ([] if straight_from is None else [straight_from])
+    assert set(accelerations) == {FREE_SPACE_ACCELERATION}
+
+
 def test_the_insertion_plans_grasps_whose_lift_goes_straight_up_first():
     """Where a grasp's lift has no straight screw motion up, the lift is a joint-space move to another configuration of
     the arm, which whirled the peg out of the fingers (Solar Panel, orbit, procedural, seed 64019: the first peg, and
