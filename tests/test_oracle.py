@@ -542,16 +542,26 @@ def test_the_push_is_planned_from_where_the_move_over_the_hole_leaves_the_arm(in
 
 class _ArmsSweepingTheHeldPeg(_ArmsOverTheHole):
     """...whose joint move to arm ``i`` sweeps the held box into an obstacle where ``sweeps[i]``; it records the
-    obstacles each check was given."""
+    obstacles in use when each check ran."""
+
+    all_obstacles = np.array([[0.0, 0.0, 0.05], [0.3, 0.0, 0.05]])  # on the hole's axis, and far from it
 
     def __init__(self, arms_and_margins, sweeps):
         super().__init__(arms_and_margins)
         self.sweeps = {float(arm[0]): sweep for arm, sweep in zip(self.arms, sweeps)}
-        self.obstacles_in_use = np.array([[0.0, 0.0, 0.05], [0.3, 0.0, 0.05]])  # on the hole's axis, and far from it
+        self.in_use = self.all_obstacles
         self.checked_against = []
 
-    def path_keeps_held_box_clear(self, start, goal, box_in_tcp, half_extents, obstacles=None):
-        self.checked_against.append(obstacles)
+    @contextmanager
+    def obstacles_only(self, choose):
+        previous, self.in_use = self.in_use, choose(self.all_obstacles)
+        try:
+            yield
+        finally:
+            self.in_use = previous
+
+    def path_keeps_held_box_clear(self, start, goal, box_in_tcp, half_extents):
+        self.checked_against.append(self.in_use)
         return not self.sweeps[float(goal[0])]
 
     def joint_move_end(self, start, goal):

@@ -661,18 +661,11 @@ class Oracle(Policy):
                 return False
         return True
 
-    @property
-    def obstacles_in_use(self) -> np.ndarray:
-        """The planner's obstacle points now (world frame)."""
-        return self._obstacles_in_use
-
-    def path_keeps_held_box_clear(
-        self, start: np.ndarray, goal: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray, samples: int = 20, obstacles: Optional[np.ndarray] = None
-    ) -> bool:
-        """Whether a box held in the hand (its 4x4 pose in the TCP frame and its half extents) stays clear of the
-        planner's obstacle points (or of ``obstacles``) along the straight joint move from ``start`` to ``goal``.
+    def path_keeps_held_box_clear(self, start: np.ndarray, goal: np.ndarray, box_in_tcp: np.ndarray, half_extents: np.ndarray, samples: int = 20) -> bool:
+        """Whether a box held in the hand (``box_held_in_hand``: its 4x4 pose in the TCP frame and its half extents) stays clear
+        of the planner's obstacle points in use along the straight joint move from ``start`` to ``goal``.
         (mplib's attached objects would do this, but mplib 0.1.1 places them as if the arm's base stood at the origin.)"""
-        obstacles = self._obstacles_in_use if obstacles is None else obstacles
+        obstacles = self._obstacles_in_use
         for position, rotation in zip(*self.tcp_path(start, goal, self._path_samples(start, goal, samples))):
             box = np.eye(4)
             box[:3, :3], box[:3, 3] = rotation.as_matrix(), position
@@ -877,6 +870,16 @@ def _ik_starts(planner, dof: int, count: int = 24) -> np.ndarray:
     """Fixed pseudo-random start configurations within the joint limits (the same in every process)."""
     limits = np.asarray(planner.joint_limits)[:dof]
     return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], size=(count, dof))
+
+
+def box_held_in_hand(points_in_object: np.ndarray, object_pose: np.ndarray, hand_pose: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The bounding box of an object's points (``points_in_object``, in its own frame), grown by ``margin``, as a hand
+    at ``hand_pose`` holds the object at ``object_pose`` (both world, 4 x 4): the box's pose in the TCP frame and its
+    half extents (``Oracle.path_keeps_held_box_clear``)."""
+    low, high = points_in_object.min(axis=0), points_in_object.max(axis=0)
+    box_in_object = np.eye(4)
+    box_in_object[:3, 3] = (low + high) / 2
+    return np.linalg.inv(hand_pose) @ object_pose @ box_in_object, (high - low) / 2 + margin
 
 
 def surface_points(asset, pose: np.ndarray = np.eye(4), margin: float = 0.0, spacing: float = POINT_SPACING) -> np.ndarray:

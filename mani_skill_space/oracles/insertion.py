@@ -35,6 +35,7 @@ from mani_skill_space.oracles.base import (
     PlanningFailed,
     at_height,
     backed_off,
+    box_held_in_hand,
     collision_vertices,
     finger_pad_rectangle,
     inflated_surface_points,
@@ -679,7 +680,7 @@ class PegInserter:
                 keeps_margin = margin >= self.push_joint_margin
                 if not keeps_margin and best is not None and margin <= best[1]:
                     continue
-                if start is not None and not self._keeps_held_peg_clear(target, start, arm, held_box):  # checked last: the dearest
+                if start is not None and not self._keeps_held_peg_clear(start, arm, held_box):  # checked last: the dearest
                     continue
                 if keeps_margin:
                     return arm, margin
@@ -694,17 +695,15 @@ class PegInserter:
             return None
         peg = target.peg.pose.sp.to_transformation_matrix()
         in_peg = (collision_vertices(target.peg) - peg[:3, 3]) @ peg[:3, :3]
-        low, high = in_peg.min(axis=0), in_peg.max(axis=0)
-        box_in_peg = np.eye(4)
-        box_in_peg[:3, 3] = (low + high) / 2
-        return np.linalg.inv(hand) @ peg @ box_in_peg, (high - low) / 2 + HELD_PEG_MARGIN
+        return box_held_in_hand(in_peg, peg, hand, HELD_PEG_MARGIN)
 
-    def _keeps_held_peg_clear(self, target: PegTarget, start: np.ndarray, arm: np.ndarray, held_box: Optional[tuple[np.ndarray, np.ndarray]]) -> bool:
-        """Whether the straight joint move from ``start`` to ``arm`` keeps ``held_box`` clear of the obstacles outside the
-        hole's keep-out (where the swing ends, the peg's tip over the entrance); True where there is no box to keep clear."""
+    def _keeps_held_peg_clear(self, start: np.ndarray, arm: np.ndarray, held_box: Optional[tuple[np.ndarray, np.ndarray]]) -> bool:
+        """Whether the straight joint move from ``start`` to ``arm`` keeps ``held_box`` clear of the obstacles in use
+        (``_insertion_arm`` leaves out the hole's keep-out, where the swing brings the peg's tip); True where there is no
+        box to keep clear."""
         if held_box is None:
             return True
-        return self.oracle.path_keeps_held_box_clear(start, arm, *held_box, obstacles=outside_keepout(self.oracle.obstacles_in_use, target))
+        return self.oracle.path_keeps_held_box_clear(start, arm, *held_box)
 
     def _grasp_candidates(self, target: PegTarget, tip: np.ndarray, peg_points: np.ndarray) -> list[sapien.Pose]:
         """Hand poses taking the lying peg (its collision vertices ``peg_points``), most natural first: every grasp

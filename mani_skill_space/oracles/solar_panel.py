@@ -14,7 +14,7 @@ from typing import Iterator
 import numpy as np
 import sapien
 
-from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, raised, surface_points
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, box_held_in_hand, raised, surface_points
 from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
 
 INSERTION_ORDER = (2, 3, 0, 1)
@@ -216,12 +216,8 @@ class SolarPanelOracle(Oracle):
         """The panel's bounding box (of its collision parts, grown by HELD_PANEL_MARGIN) as the hand holds it now: its
         pose in the TCP frame and its half extents. The planner knows nothing of the panel, and a joint-space swing
         that dips it sweeps it through the pegs' tops."""
-        points = surface_points(env.panel_assets[0])
-        low, high = points.min(axis=0), points.max(axis=0)
-        box_in_panel = np.eye(4)
-        box_in_panel[:3, 3] = (low + high) / 2
-        panel_in_tcp = np.linalg.inv(self.tcp_pose().to_transformation_matrix()) @ env.panel.pose.sp.to_transformation_matrix()
-        return panel_in_tcp @ box_in_panel, (high - low) / 2 + HELD_PANEL_MARGIN
+        panel = env.panel.pose.sp.to_transformation_matrix()
+        return box_held_in_hand(surface_points(env.panel_assets[0]), panel, self.tcp_pose().to_transformation_matrix(), HELD_PANEL_MARGIN)
 
     def _tcp_for_seat(self, env, height: float, half_turns: int = None) -> sapien.Pose:
         """The TCP pose that puts the panel's seat ``height`` above its target, given how the hand holds the panel
