@@ -244,6 +244,27 @@ def test_a_standing_pegs_obstacle_points_cover_its_edges_and_corners_at_the_marg
     assert max(np.linalg.norm(pushed - query, axis=1).min() for query in top_edges) > 0.7 * margin
 
 
+@pytest.mark.parametrize("margin", [0.01, 0.02])
+def test_the_standing_pegs_are_kept_clear_by_the_margin_asked_for(margin):
+    """``other_pegs``: a standing peg's points lie the margin asked for beyond it (Solar Panel's ``PEG_MARGIN`` by
+    default, Multi-Peg's own 1 cm), a lying peg's on its surface, and the held peg has none."""
+    from types import SimpleNamespace
+
+    import trimesh
+
+    from mani_skill_space.oracles.insertion import other_pegs
+    from mani_skill_space.procgen.asset import Asset, CollisionPart
+
+    half = np.array([0.01, 0.01, 0.05])
+    peg = Asset("peg", (), (CollisionPart(trimesh.creation.box(extents=2 * half)),))
+    pegs = [SimpleNamespace(pose=SimpleNamespace(sp=sapien.Pose([0.3 * i, 0.0, 0.0]))) for i in range(3)]
+    points = other_pegs(pegs, [peg] * 3, held=1, standing=(0,), margin=margin)
+    beyond = lambda i: np.linalg.norm(np.maximum(np.abs(points[np.abs(points[:, 0] - 0.3 * i) < 0.15] - [0.3 * i, 0.0, 0.0]) - half, 0.0), axis=1)  # noqa: E731
+    assert beyond(0).min() >= 0.98 * margin and beyond(0).max() <= margin + 1e-6
+    assert len(beyond(1)) == 0
+    assert len(beyond(2)) and beyond(2).max() <= 1e-6
+
+
 PAD = np.array([[-0.01, -0.01], [0.01, 0.01]])
 
 

@@ -808,7 +808,8 @@ class PegInserter:
 
 PEG_MARGIN = 0.02
 """The arm keeps about this far (m) from the pegs already standing in their holes, edges and corners included
-(``inflated_surface_points``). (Not around the pegs still lying on the deck: the hand must reach between them.)"""
+(``inflated_surface_points``), in Solar Panel Assembly (Multi-Peg-in-Hole keeps its own
+``peg_in_hole.MULTI_PEG_STANDING_MARGIN``). (Not around the pegs still lying on the deck: the hand must reach between them.)"""
 STANDING_PEG_SPACING = 0.005
 """The standing pegs' obstacle points this far apart: at the usual 2 cm spacing an open finger can pass between two
 points on a standing peg's top and knock it out of its socket."""
@@ -831,15 +832,15 @@ def end_nearest(target: PegTarget, point: np.ndarray) -> int:
     return int(np.argmin(distance))
 
 
-def other_pegs(pegs: list, peg_assets: list, held: int, standing, poses: Optional[dict] = None) -> np.ndarray:
+def other_pegs(pegs: list, peg_assets: list, held: int, standing, poses: Optional[dict] = None, margin: float = PEG_MARGIN) -> np.ndarray:
     """Obstacle points of every peg but ``held``, where it is now (or at each of the poses, 4 x 4, that ``poses`` lists
-    for its index): those ``standing`` in their holes with ``PEG_MARGIN`` (an open finger must not knock one out),
+    for its index): those ``standing`` in their holes with ``margin`` (an open finger must not knock one out),
     those still lying without (the hand reaches between them)."""
     poses = poses or {}
     points = []
     for i, peg in enumerate(pegs):
         if i != held:
-            in_peg = inflated_surface_points(peg_assets[i], margin=PEG_MARGIN, spacing=STANDING_PEG_SPACING) if i in standing else surface_points(peg_assets[i])
+            in_peg = inflated_surface_points(peg_assets[i], margin=margin, spacing=STANDING_PEG_SPACING) if i in standing else surface_points(peg_assets[i])
             points += [in_peg @ pose[:3, :3].T + pose[:3, 3] for pose in poses.get(i, [peg.pose.sp.to_transformation_matrix()])]
     return np.concatenate(points)
 
