@@ -1414,6 +1414,61 @@ def _grasp_attempts(misses: int):
     return planner.oracle, plans, True
 
 
+class _PegSettling(_MissingOnce):
+    """...whose grasps hold, and whose peg moves by ``settle`` (a pose in the peg's frame) while the hand goes to each
+    pre-grasp pose."""
+
+    def __init__(self, target, settle: sapien.Pose):
+        super().__init__(misses=0)
+        self.target, self.settle = target, settle
+
+    def screw_to(self, pose, what, *args, **kwargs):
+        if what == "pre-grasp":
+            self.target.peg.pose.sp = self.target.peg.pose.sp * self.settle
+        yield from super().screw_to(pose, what, *args, **kwargs)
+
+
+_TURNED_4_DEGREES = sapien.Pose(q=[np.cos(np.radians(2.0)), np.sin(np.radians(2.0)), 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    "settle, replans, plans",
+    [
+        (_TURNED_4_DEGREES, True, 2),  # turned past PEG_MOVED on its resting face: planned again from where it lies
+        (_TURNED_4_DEGREES, False, 1),  # unless the settings ask
+        (sapien.Pose([0.001, 0.0, 0.0]), True, 1),  # a millimetre is within PEG_MOVED
+    ],
+)
+def test_a_grasp_is_planned_again_where_the_peg_moved_before_the_hand_came(settle, replans, plans):
+    """Multi-Peg-in-Hole, Earth, procedural, tuning seed 62013: the first peg settled 9.5 degrees on its resting face
+    after the plan was made, the hand took it 9.8 degrees off the planned grip, and no arm configuration lined it up
+    with the hole. Where the settings ask, a peg that moved by ``PEG_MOVED`` while the hand went to the pre-grasp pose
+    has its grasp planned again, from where it lies then, once (the peg here moves at every pre-grasp)."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
+
+    target = SimpleNamespace(peg=SimpleNamespace(pose=SimpleNamespace(sp=_LYING_PEG)))
+    planner = PegInserter.__new__(PegInserter)
+    planner.oracle = _PegSettling(target, settle)
+    planner.settings, planner.reach_obstacles = InsertionSettings(replans_when_the_peg_moved=replans), None
+    planner._end_toward_arm = lambda target: 0
+    planned_on = []
+
+    def plan_grasp(target, end, missed):
+        assert not missed
+        planned_on.append(target.peg.pose.sp)
+        return target.peg.pose.sp * sapien.Pose([0.0, 0.0, 0.02], [0.0, 1.0, 0.0, 0.0]), 0.0
+
+    planner._plan_grasp = plan_grasp
+    for _ in planner._grasp(target):
+        pass
+    assert len(planned_on) == plans
+    assert planner.oracle.log == ["pre-grasp"] * plans + ["grasp", "close", "wait"]
+    if plans == 2:  # the second plan saw the peg where it lay after the first pre-grasp
+        np.testing.assert_allclose(planned_on[1].q, (_LYING_PEG * settle).q, atol=1e-6)
+
+
 def test_a_grasp_that_misses_is_let_go_of_and_another_planned_away_from_it():
     from mani_skill_space.oracles.insertion import GRASP_ATTEMPTS
 

@@ -57,7 +57,12 @@ MULTI_INSERTION_ORDER = (0, 3, 1, 2)
 """Holes in the order they are filled: the outer ones first, so that the arm carrying a peg over an inner module
 has the standing pegs beside it, not in the way of its elbow."""
 MULTI_PEG_INSERTION = InsertionSettings(
-    lift_height=SOLAR_PEG_LIFT_HEIGHT, relax_steps=6, insert_step=0.004, refine_passes=1, pre_grasp_acceleration=FREE_SPACE_ACCELERATION
+    lift_height=SOLAR_PEG_LIFT_HEIGHT,
+    relax_steps=6,
+    insert_step=0.004,
+    refine_passes=1,
+    pre_grasp_acceleration=FREE_SPACE_ACCELERATION,
+    replans_when_the_peg_moved=True,
 )
 """Peg-in-Hole's insertion at Solar Panel Assembly's pace (``oracles.solar_panel.PEG_INSERTION``: 4 mm push steps,
 one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at twice the accelerations; at
