@@ -223,10 +223,10 @@ class InsertionSettings:
     """Whether the grasp is planned again, once, where the peg has moved (``PEG_MOVED``) between the plan and the hand's
     arrival at the pre-grasp pose. A near-round procedural peg (a 32-sided prism) lies at reset on a facet whose edge is
     0.5-2 mm from below its centre of mass, and can roll by up to a facet (11 degrees) in the first steps, while the
-    first peg's plan is made at reset (Multi-Peg-in-Hole,
-    Earth, procedural, tuning seeds 62013 and 62026: the first peg turned 9.5 and 4.3 degrees, the hand took it 9.8 and
-    4.7 degrees off the planned grip, and no arm configuration lined it up with the hole; planned again, 62013
-    assembles, and 62026 runs out of time on its last peg)."""
+    first peg's plan is made at reset (Multi-Peg-in-Hole, Earth, procedural, tuning seeds 62013 and 62026: the first
+    peg turned 9.5 and 4.3 degrees, the hand took it 9.8 and 4.7 degrees off the planned grip, and no arm
+    configuration lined it up with the hole; planned again, 62013 assembles, and 62026 runs out of time on its last
+    peg)."""
 
 
 class PegInserter:
