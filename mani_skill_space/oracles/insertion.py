@@ -57,8 +57,9 @@ that missed (``MISSED_GRASP_NEIGHBOURHOOD``)."""
 BACK_OFF_KEEPOUT = 0.1
 """m: the obstacles this close to the TCP are left out of the planner's while the hand backs off a grasp that missed."""
 PEG_MOVED = (0.002, np.radians(2.0))
-"""(m, rad): a peg whose planned grasp, carried with it, has moved this far since the plan has moved
-(``InsertionSettings.replans_when_the_peg_moved``); dropped from 0.5 mm onto its resting face it moves less."""
+"""(m, rad): a peg counts as moved since its grasp was planned where that grasp, carried along with the peg, is
+now this far from where it was planned (``InsertionSettings.replans_when_the_peg_moved``); a peg dropped from 0.5 mm
+onto its resting face, and nothing more, moves less."""
 MISSED_GRASP_NEIGHBOURHOOD = (0.01, np.radians(10.0))
 """(m, rad): a grasp this close to one that missed, or to its twin with the wrist turned half a turn (the same grip,
 the fingers swapped), in the peg's frame, is not tried again. The angle stays clear of the 15 degrees between

@@ -69,7 +69,8 @@ one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at
 Peg-in-Hole's, 16 of the 28 procedural failures on the tuning seeds ran out of time), the push easing off before the
 peg is let go (in orbit a peg let go while pressed in springs back out). The peg is carried over the modules at
 ``MultiPegInHoleOracle._lift_height``, at most this ``lift_height``: high enough for the dataset's 0.2 m peg
-hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly)."""
+hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly). Where a peg has rolled
+between the plan and the hand's arrival over it, its grasp is planned again (``replans_when_the_peg_moved``)."""
 
 
 LIFT_CLEARANCE = 0.05
