@@ -595,6 +595,7 @@ def test_a_swing_over_the_hole_keeps_the_held_peg_clear_where_the_settings_ask(i
     hanging from it struck the arm's mount and turned 40 degrees in the grip (the planner does not see it). Where the
     settings ask, an arm whose swing sweeps the held peg's box into an obstacle is not moved to; the check leaves out
     the obstacles round the hole's entrance, where the swing brings the peg's tip."""
+    from mani_skill_space.oracles.base import collision_vertices
     from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter
 
     arms = [np.full(7, float(i)) for i in range(2)]
@@ -603,7 +604,7 @@ def test_a_swing_over_the_hole_keeps_the_held_peg_clear_where_the_settings_ask(i
     planner.oracle, planner.planned_arm = oracle, None
     planner.settings = InsertionSettings(swing_keeps_held_peg_clear=keeps_clear)
     target = _peg_target(inserter.oracle.env, bottom=np.eye(4), depth=0.04)
-    held_box = planner._held_peg_box(target, np.eye(4))
+    held_box = planner._held_peg_box(target, collision_vertices(target.peg), np.eye(4))
     assert (held_box is not None) is keeps_clear
     found = planner._insertion_arm(target, 0.0, np.eye(4), start=np.zeros(7), held_box=held_box)
     np.testing.assert_array_equal(found[0], arms[chosen])
@@ -623,7 +624,7 @@ def test_the_held_pegs_box_holds_the_peg_where_the_hand_holds_it(inserter):
     planner.settings = InsertionSettings(swing_keeps_held_peg_clear=True)
     target = _peg_target(inserter.oracle.env)
     hand = sapien.Pose(p=[0.1, -0.2, 0.4], q=Rotation.from_rotvec([0.3, 2.0, -0.5]).as_quat()[[3, 0, 1, 2]]).to_transformation_matrix()
-    box_in_tcp, half_extents = planner._held_peg_box(target, hand)
+    box_in_tcp, half_extents = planner._held_peg_box(target, collision_vertices(target.peg), hand)
     box = hand @ box_in_tcp
     in_box = np.abs((collision_vertices(target.peg) - box[:3, 3]) @ box[:3, :3])
     assert np.all(in_box <= half_extents - HELD_PEG_MARGIN + 1e-6)

@@ -507,7 +507,7 @@ class PegInserter:
             if lifted is None:
                 continue
             tip_in_hand = _tip_in_hand(grasp, tip)
-            held_box = self._held_peg_box(target, grasp.to_transformation_matrix())
+            held_box = self._held_peg_box(target, peg_points, grasp.to_transformation_matrix())
             grip_half_width = _grip_half_width(grasp, peg_points)
             hand_over_hole = lambda twist: _frame_holding_tip_over_hole(target, twist, tip_in_hand, depth)  # noqa: E731
             # the hand pointing down and away from the arm first
@@ -580,7 +580,7 @@ class PegInserter:
         over the hole; the margin is that of the push planned); where none keeps the margin, the first feasible
         one in that order. (The fingers' clearance round the hole is not checked again here.)"""
         tip_in_hand = np.linalg.inv(self.oracle.tcp_pose().to_transformation_matrix()) @ target.end_frames()[end]
-        held_box = self._held_peg_box(target, self.oracle.tcp_pose().to_transformation_matrix())
+        held_box = self._held_peg_box(target, collision_vertices(target.peg), self.oracle.tcp_pose().to_transformation_matrix())
         twists = sorted(_twists(target.symmetry), key=lambda other: abs(np.angle(np.exp(1j * (other - twist)))))
 
         def line_ups() -> Iterator[tuple[tuple[np.ndarray, float], float]]:
@@ -703,14 +703,15 @@ class PegInserter:
                 best = (arm, margin)
         return best
 
-    def _held_peg_box(self, target: PegTarget, hand: np.ndarray) -> Optional[tuple[np.ndarray, np.ndarray]]:
-        """The peg's bounding box in its own frame, grown by ``HELD_PEG_MARGIN``, as the hand at ``hand`` (world, 4 x 4)
-        holds the peg where it is now: its pose in the TCP frame and its half extents (``Oracle.path_keeps_held_box_clear``);
-        None where the settings do not ask for it (``swing_keeps_held_peg_clear``)."""
+    def _held_peg_box(self, target: PegTarget, peg_points: np.ndarray, hand: np.ndarray) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """The peg's bounding box in its own frame (of its collision vertices where it is now, ``peg_points``, world),
+        grown by ``HELD_PEG_MARGIN``, as the hand at ``hand`` (world, 4 x 4) holds the peg where it is now: its pose in the
+        TCP frame and its half extents (``Oracle.path_keeps_held_box_clear``); None where the settings do not ask for it
+        (``swing_keeps_held_peg_clear``)."""
         if not self.settings.swing_keeps_held_peg_clear:
             return None
         peg = target.peg.pose.sp.to_transformation_matrix()
-        in_peg = (collision_vertices(target.peg) - peg[:3, 3]) @ peg[:3, :3]
+        in_peg = (peg_points - peg[:3, 3]) @ peg[:3, :3]
         return box_held_in_hand(in_peg, peg, hand, HELD_PEG_MARGIN)
 
     def _keeps_held_peg_clear(self, start: np.ndarray, arm: np.ndarray, held_box: Optional[tuple[np.ndarray, np.ndarray]]) -> bool:
