@@ -1535,6 +1535,7 @@ def _multi_peg_oracle_planning_with(monkeypatch, inserter, obstacles=lambda env,
     monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
     monkeypatch.setattr(oracle, "_obstacles", obstacles)
     monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
+    oracle._modules_with_margin = [np.full((1, 3), float(module)) for module in range(4)]  # made by ``plan``
     return oracle
 
 
@@ -1547,9 +1548,11 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
     under the hand) waits until the others are in; its first action comes with the insertion chosen."""
     from types import SimpleNamespace
 
+    pushes_among = []
+
     class FakeInserter:
-        def __init__(self, oracle, settings, reach_obstacles):
-            pass
+        def __init__(self, oracle, settings, reach_obstacles, push_obstacles):
+            pushes_among.append(push_obstacles)
 
         def insert(self, target):
             if target in unplannable:
@@ -1564,6 +1567,8 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
     hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, None, list(standing))
     assert hole == chosen and list(insertion) == [("first action of", chosen), ("second action of", chosen)]
     assert solvers[-1] == (chosen, tuple(standing))  # the planner of the peg chosen, with the pegs standing as obstacles
+    # pushed in among the modules beside its hole's (``NEIGHBOUR_MARGIN`` out; here each module's one point)
+    np.testing.assert_array_equal(pushes_among[-1][:, 0], [module for module in range(4) if module != chosen])
 
 
 @pytest.mark.parametrize(
@@ -1577,7 +1582,7 @@ def test_of_the_last_two_pegs_the_multi_peg_oracle_inserts_first_the_one_that_le
     from types import SimpleNamespace
 
     class FakeInserter:
-        def __init__(self, oracle, settings, reach_obstacles):
+        def __init__(self, oracle, settings, reach_obstacles, push_obstacles):
             pass
 
         def insert(self, target):
@@ -1620,7 +1625,7 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
     from types import SimpleNamespace
 
     class NeverStarts:
-        def __init__(self, oracle, settings, reach_obstacles):
+        def __init__(self, oracle, settings, reach_obstacles, push_obstacles):
             pass
 
         def insert(self, target):
@@ -1630,3 +1635,66 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
     oracle = _multi_peg_oracle_planning_with(monkeypatch, NeverStarts)
     with pytest.raises(PlanningFailed, match="no grasp of peg 3"):
         oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0])
+
+
+@pytest.mark.parametrize("tcp_speed_limit, ends_once_seated, ends_early", [(None, False, False), (None, True, True), (0.25, False, True)])
+def test_a_push_ends_once_the_peg_is_seated_under_a_tcp_controller_or_where_the_settings_ask(tcp_speed_limit, ends_once_seated, ends_early):
+    """Multi-Peg-in-Hole's four pushes run short of its 800 steps (orbit, tuning seed 62029: the last peg let go at step
+    769): where ``InsertionSettings.push_ends_once_seated`` asks, a push in joint control ends, as under a TCP controller,
+    once its schedule has run and the tip is seated (``SEATED_TIP_HEIGHT``), not after all of ``PUSH_EXTRA_STEPS``."""
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.insertion import PUSH_EXTRA_STEPS, SEATED_TIP_HEIGHT, SETTLE_STEPS, InsertionSettings, PegInserter
+
+    class Pushing:
+        def __init__(self):
+            self.tcp_speed_limit, self.until = tcp_speed_limit, "not asked"
+
+        def line_to(self, pose, what, settle_steps):
+            yield what
+
+        def servo(self, goal, steps, what, until=None):
+            self.steps, self.until = steps, until
+            yield what
+
+    tip = np.eye(4)
+    target = SimpleNamespace(bottom=np.eye(4), depth=0.04, end_frames=lambda: np.stack([tip, tip]))
+    inserter = PegInserter.__new__(PegInserter)
+    inserter.oracle, inserter.settings = Pushing(), InsertionSettings(refine_passes=0, push_ends_once_seated=ends_once_seated)
+    inserter._tcp_for_tip = lambda target, end, frame: sapien.Pose()
+    assert list(inserter._lower_in(target, 0, 0.0)) == ["pre-insert", "insert"]
+    until = inserter.oracle.until
+    assert (until is not None) == ends_early
+    if ends_early:
+        scheduled = inserter.oracle.steps - SETTLE_STEPS - PUSH_EXTRA_STEPS
+        tip[2, 3] = SEATED_TIP_HEIGHT / 2
+        assert until(scheduled) and not until(scheduled - 1)  # seated, once the schedule has run
+        tip[2, 3] = 2 * SEATED_TIP_HEIGHT
+        assert not until(scheduled)
+
+
+@pytest.mark.parametrize("push_obstacles", [None, np.array([[0.1, 0.0, 0.05]])])
+def test_the_push_is_planned_with_the_push_obstacles_besides_the_points_outside_the_keepout(push_obstacles):
+    """Multi-Peg-in-Hole, orbit, tuning seed 62029: planned on the next module's bare surface, the hand grazed its top and
+    the push stalled with the peg 86% of the way in. ``PegInserter.push_obstacles`` (the modules beside the hole's, with
+    a margin) stand among the planner's obstacles wherever the keep-out round the hole's axis is left out."""
+    from contextlib import contextmanager
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.insertion import PegInserter
+
+    points = np.array([[0.0, 0.0, 0.05], [0.3, 0.0, 0.05], [0.0, 0.0, -0.05]])  # on the axis near the entrance, far off it, deep below
+    chosen = []
+
+    class Planning:
+        @contextmanager
+        def obstacles_only(self, choose):
+            chosen.append(choose(points))
+            yield
+
+    inserter = PegInserter.__new__(PegInserter)
+    inserter.oracle, inserter.push_obstacles = Planning(), push_obstacles
+    with inserter._near_the_hole(SimpleNamespace(bottom=np.eye(4), depth=0.04, radius=0.01)):
+        pass
+    expected = points[1:] if push_obstacles is None else np.concatenate([points[1:], push_obstacles])
+    np.testing.assert_array_equal(chosen[0], expected)

@@ -220,6 +220,10 @@ class InsertionSettings:
     push_margin_under_tcp_control: bool = False
     """Whether an oracle acting through a TCP controller (``pd_ee_delta_pose``) also prefers pushes that keep
     ``PUSH_JOINT_MARGIN`` from the joint limits (``PegInserter.push_joint_margin``)."""
+    push_ends_once_seated: bool = False
+    """Whether a push in joint control also ends once its schedule has run and the tip is seated (``SEATED_TIP_HEIGHT``),
+    as it does under a TCP controller, rather than after all of ``PUSH_EXTRA_STEPS`` (where the episode's time is
+    short for the pushes it asks for: Multi-Peg-in-Hole's four)."""
     replans_when_the_peg_moved: bool = False
     """Whether the grasp is planned again, once, where the peg has moved (``PEG_MOVED``) between the plan and the hand's
     arrival at the pre-grasp pose. A near-round procedural peg (a 32-sided prism) lies at reset on a facet whose edge is
@@ -234,11 +238,18 @@ class PegInserter:
     """Grasps a lying peg, lines it up over its hole and pushes it to the bottom, with the motions of ``oracle``
     (whose solver must be ready, with the hole's surroundings as obstacles)."""
 
-    def __init__(self, oracle: Oracle, settings: InsertionSettings = InsertionSettings(), reach_obstacles: Optional[np.ndarray] = None):
+    push_obstacles: Optional[np.ndarray] = None
+
+    def __init__(
+        self, oracle: Oracle, settings: InsertionSettings = InsertionSettings(), reach_obstacles: Optional[np.ndarray] = None, push_obstacles: Optional[np.ndarray] = None
+    ):
         """``reach_obstacles``: more obstacle points (world frame) for the motions that take the peg and carry it
-        over the hole (not for the push into it), e.g. the hole's surroundings with a margin."""
+        over the hole (not for the push into it), e.g. the hole's surroundings with a margin. ``push_obstacles``: more
+        for the push and the line-up over the entrance, where the keep-out round the hole's axis is left out (e.g.
+        the blocks beside the hole's, with a margin)."""
         self.oracle, self.settings = oracle, settings
         self.reach_obstacles = reach_obstacles
+        self.push_obstacles = push_obstacles
         self.finger_corners = open_finger_corners(oracle.env)
         self.finger_pad = finger_pad_rectangle(oracle.env)
         self.planned_arm: Optional[np.ndarray] = None
@@ -262,6 +273,13 @@ class PegInserter:
         """``carry_acceleration_under_tcp_control`` for an oracle whose TCP speed is limited, else 1."""
         return self.settings.carry_acceleration_under_tcp_control if self.oracle.tcp_speed_limit is not None else 1.0
 
+    def _near_the_hole(self, target: PegTarget):
+        """Plan, inside the block, with the obstacles outside the keep-out round the hole's axis (``outside_keepout``)
+        and the ``push_obstacles``."""
+        if self.push_obstacles is None:
+            return self.oracle.obstacles_only(lambda points: outside_keepout(points, target))
+        return self.oracle.obstacles_only(lambda points: np.concatenate([outside_keepout(points, target), self.push_obstacles]))
+
     def _reaching(self):
         """Plan with the ``reach_obstacles`` too, inside the block."""
         if self.reach_obstacles is None:
@@ -277,7 +295,7 @@ class PegInserter:
 
         for attempt in range(self.settings.insert_attempts):
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
-                with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+                with self._near_the_hole(target):
                     yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
             twist = yield from self._push_in(target, end, twist, line_up=attempt == 0)
             if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
@@ -373,7 +391,7 @@ class PegInserter:
                         raise
                     swing, twist = self._line_up(target, end, twist)
                 yield from self._carry_over(swing)
-        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+        with self._near_the_hole(target):
             yield from self._lower_in(target, end, twist)
         return twist
 
@@ -388,7 +406,7 @@ class PegInserter:
             return self._tcp_for_tip(target, end, _along_axis(bottom, twist, height))
 
         seated = None
-        if self.oracle.tcp_speed_limit is not None:
+        if self.oracle.tcp_speed_limit is not None or self.settings.push_ends_once_seated:
             seated = lambda step: step >= len(heights) and self._tip_height(target, end) <= SEATED_TIP_HEIGHT  # noqa: E731
         yield from self.oracle.servo(tip_goal, len(heights) + SETTLE_STEPS + PUSH_EXTRA_STEPS, "insert", until=seated)
 
@@ -654,7 +672,7 @@ class PegInserter:
                 return None
             paths.append(path)
             arm = path[-1]
-        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+        with self._near_the_hole(target):
             margin = self.oracle.screw_limit_margin(arm, self._hand_over_hole(target, twist, tip_in_hand, push_to))
         return None if margin is None else (Swing(arm, tuple(paths)), margin)
 
@@ -685,7 +703,7 @@ class PegInserter:
             solutions = self.oracle.ik_solutions(over, near=self.planned_arm)[:1] + solutions
         arms = [arm for arm in solutions if start is None or self.oracle.path_is_free(start, arm)]
         best = None
-        with self.oracle.obstacles_only(lambda points: outside_keepout(points, target)):
+        with self._near_the_hole(target):
             for arm in arms:
                 reached = arm if start is None else self.oracle.joint_move_end(start, arm)
                 if reached is None:

@@ -46,6 +46,12 @@ class PegInHoleOracle(Oracle):
         yield from PegInserter(self, PEG_IN_HOLE_INSERTION, reach_obstacles=wide_module).insert(target)
 
 
+NEIGHBOUR_MARGIN = 0.002
+"""While a peg is pushed into its hole, the planner keeps the hand this far (m) from the modules beside it: planned
+on their bare surfaces, the hand grazed the next module's top, and the push stalled there (orbit, tuning seed 62029:
+the third peg 86% of the way in, three pushes running)."""
+NEIGHBOUR_SPACING = 0.005
+"""m: how far apart those points are."""
 MULTI_PEG_STANDING_MARGIN = 0.01
 """The arm keeps this far (m) from the pegs already standing in their holes (``other_pegs``), their edges and corners
 included as in Solar Panel Assembly, but half its ``insertion.PEG_MARGIN``: Multi-Peg's pegs stand in modules 0.15 m
@@ -63,6 +69,7 @@ MULTI_PEG_INSERTION = InsertionSettings(
     refine_passes=1,
     pre_grasp_acceleration=FREE_SPACE_ACCELERATION,
     replans_when_the_peg_moved=True,
+    push_ends_once_seated=True,
 )
 """Peg-in-Hole's insertion at Solar Panel Assembly's pace (``oracles.solar_panel.PEG_INSERTION``: 4 mm push steps,
 one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at twice the accelerations; at
@@ -70,7 +77,9 @@ Peg-in-Hole's, 16 of the 28 procedural failures on the tuning seeds ran out of t
 peg is let go (in orbit a peg let go while pressed in springs back out). The peg is carried over the modules at
 ``MultiPegInHoleOracle._lift_height``, at most this ``lift_height``: high enough for the dataset's 0.2 m peg
 hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly). Where a peg has rolled
-between the plan and the hand's arrival over it, its grasp is planned again (``replans_when_the_peg_moved``)."""
+between the plan and the hand's arrival over it, its grasp is planned again (``replans_when_the_peg_moved``). A push
+ends once the peg is seated (``push_ends_once_seated``): the four pushes' extra steps took 27 of the 800 steps on
+average (orbit tuning seeds), and the pushes that jam take most of what is left."""
 
 
 LIFT_CLEARANCE = 0.05
@@ -82,7 +91,8 @@ class MultiPegInHoleOracle(Oracle):
     """Oracle for MultiPegInHoleAssembly-v1: Peg-in-Hole's insertion of each peg into its own hole in turn
     (``MULTI_INSERTION_ORDER``, a peg whose insertion cannot start yet left for later:
     ``_first_plannable_insertion``), letting go of it and backing straight up before the next, with the modules and
-    the other pegs (those standing with a margin) as the planner's obstacles."""
+    the other pegs (those standing with a margin) as the planner's obstacles, and, while a peg is pushed in, the
+    modules beside its hole's with ``NEIGHBOUR_MARGIN``."""
 
     screw_step = FINE_SCREW_STEP
     path_check_step = 0.02
@@ -99,6 +109,9 @@ class MultiPegInHoleOracle(Oracle):
         wide_modules = np.concatenate(
             [surface_points(env.hole_assets[i][0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN) for i, module in enumerate(modules)]
         )
+        self._modules_with_margin = [
+            surface_points(env.hole_assets[i][0], module, margin=NEIGHBOUR_MARGIN, spacing=NEIGHBOUR_SPACING) for i, module in enumerate(modules)
+        ]
         standing: list[int] = []
         while len(standing) < len(MULTI_INSERTION_ORDER):
             hole, insertion = self._first_plannable_insertion(env, modules, wide_modules, standing)
@@ -140,7 +153,8 @@ class MultiPegInHoleOracle(Oracle):
         the planner's obstacles (``_obstacles``; ``seated``: pegs at each of these poses instead of where they are)."""
         self.make_solver(env, obstacles=self._obstacles(env, modules, hole, tuple(standing), seated))
         settings = replace(MULTI_PEG_INSERTION, lift_height=self._lift_height(env, hole, seated))
-        return PegInserter(self, settings, reach_obstacles=wide_modules).insert(PegTarget.of(env, env.pegs[hole], hole))
+        beside = np.concatenate([points for i, points in enumerate(self._modules_with_margin) if i != hole])
+        return PegInserter(self, settings, reach_obstacles=wide_modules, push_obstacles=beside).insert(PegTarget.of(env, env.pegs[hole], hole))
 
     def _could_start_after(self, env, modules: list, wide_modules: np.ndarray, standing: list, first: int, then: int) -> bool:
         """Whether peg ``then``'s insertion could start from where the arm is now if peg ``first`` stood seated in its
