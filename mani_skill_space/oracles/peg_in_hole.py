@@ -78,8 +78,8 @@ peg is let go (in orbit a peg let go while pressed in springs back out). The peg
 ``MultiPegInHoleOracle._lift_height``, at most this ``lift_height``: high enough for the dataset's 0.2 m peg
 hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly). Where a peg has rolled
 between the plan and the hand's arrival over it, its grasp is planned again (``replans_when_the_peg_moved``). A push
-ends once the peg is seated (``push_ends_once_seated``): the four pushes' extra steps took 27 of the 800 steps on
-average (orbit tuning seeds), and the pushes that jam take most of what is left."""
+ends once the peg is seated (``push_ends_once_seated``): that ends the episodes 27 of their 800 steps sooner on average
+(orbit tuning seeds), where the pushes that jam and are tried again take most of what is left."""
 
 
 LIFT_CLEARANCE = 0.05
