@@ -558,8 +558,14 @@ class SpaceManipulationEnv(BaseEnv):
 
     def time_remaining(self) -> torch.Tensor:
         """Fraction of the episode left, from the elapsed steps (which the env's state carries)."""
-        limit = self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.nominal_episode_steps()
-        return 1.0 - self.elapsed_steps.float() / limit
+        return 1.0 - self.elapsed_steps.float() / self._episode_step_limit()
+
+    def steps_remaining(self) -> torch.Tensor:
+        """Control steps left in the episode, per env."""
+        return self._episode_step_limit() - self.elapsed_steps
+
+    def _episode_step_limit(self) -> int:
+        return self.spec.max_episode_steps if getattr(self, "spec", None) is not None and self.spec.max_episode_steps else self.nominal_episode_steps()
 
     def wrist_wrench(self) -> torch.Tensor:
         """Spatial force (force, torque) the wrist joint transmitted to the hand in the last physics step: what a

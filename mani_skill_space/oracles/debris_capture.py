@@ -5,7 +5,7 @@ rest relative to them), close, keep moving with it while braking gently to a sto
 
 from __future__ import annotations
 
-from typing import Iterator, Optional
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -32,6 +32,11 @@ the fingers' gap."""
 """Grasp orientations tried at each meeting point: fingers against the debris' velocity, then tilted toward
 pointing down."""
 MOST_FOLLOW_STEPS = 40
+CHASE_LEAD = 0.15
+"""Seconds (a control step and the Panda's drives' 0.1 s lag) ahead of the hand that the chase puts its target, so that
+the hand moves as fast as it is asked to (a target one step ahead of a hand that lags two moves it at half that)."""
+RESERVED_STEPS = 30
+"""Control steps the chase leaves at the end of the episode for the fingers to close, the brake and the calm hold."""
 CLOSED_FOLLOW_STEPS = 6
 CATCH_SPEED = 0.08
 """How fast (m/s) the debris may close in on the hand while the hand moves with it."""
@@ -74,18 +79,32 @@ class DebrisCaptureOracle(Oracle):
         yield from self.wait_for_success(HOLD_STEPS)
 
     def _follow_debris(self, env, meeting: sapien.Pose) -> Iterator[np.ndarray]:
-        """Move with the debris until the fingers have closed on it (for a few steps) or time runs out."""
-        closed_steps = 0
-        for _ in range(MOST_FOLLOW_STEPS):
+        """Move with the debris until the fingers have closed on it (for a few steps) or ``MOST_FOLLOW_STEPS`` have
+        passed; where they are still open then (the debris struck the hand and bounced off slower, and the hand,
+        moving with it from where its drives left it, fell behind), chase it: the same motion with the target
+        ``CHASE_LEAD`` ahead of the hand, which makes up the drives' lag, until the fingers have closed on it or only
+        ``RESERVED_STEPS`` are left."""
+        yield from self._until_held(lambda step: self._on_debris(env, meeting), "follow", lambda step: step < MOST_FOLLOW_STEPS)
+        if self.gripper != GRIPPER_CLOSED:
+            chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD)  # noqa: E731
+            yield from self._until_held(chase, "chase", lambda step: int(env.steps_remaining()[0]) > RESERVED_STEPS)
+
+    def _until_held(self, target: Callable[[int], sapien.Pose], what: str, going: Callable[[int], bool]) -> Iterator[np.ndarray]:
+        """Servo to ``target`` while ``going(step)`` holds, until the fingers have been closed ``CLOSED_FOLLOW_STEPS``."""
+        closed_steps, step = 0, 0
+        while going(step):
             if self.gripper == GRIPPER_CLOSED:
                 closed_steps += 1
                 if closed_steps > CLOSED_FOLLOW_STEPS:
                     return
-            yield from self.servo(lambda step: self._on_debris(env, meeting), 1, "follow")
+            yield from self.servo(target, 1, what)
+            step += 1
 
-    def _on_debris(self, env, meeting: sapien.Pose) -> sapien.Pose:
+    def _on_debris(self, env, meeting: sapien.Pose, lead: Optional[float] = None) -> sapien.Pose:
         """The hand's next position: moving with the debris, letting it come closer at most CATCH_SPEED (so it
-        glides between the fingers instead of being hit); the fingers close once its centre is between them."""
+        glides between the fingers instead of being hit); the fingers close once its centre is between them. The
+        target is ``lead`` seconds of the debris' motion ahead of the hand (one control step unless given), and one
+        step of the closing in."""
         position, velocity = self._debris_state(env)
         hand = self._tcp_position()
         gap = position - hand
@@ -95,7 +114,7 @@ class DebrisCaptureOracle(Oracle):
         if self.gripper != GRIPPER_CLOSED and self._tilt == 0.0:  # until they close, keep the fingers across it
             self._grip_orientation = self._across(meeting, self._long_axis(env, 0.0))
         catch_up = min(distance / CATCH_TIME, CATCH_SPEED) * gap / max(distance, 1e-9)
-        return sapien.Pose(hand + (velocity + catch_up) * env.control_timestep, self._grip_orientation)
+        return sapien.Pose(hand + velocity * (lead or env.control_timestep) + catch_up * env.control_timestep, self._grip_orientation)
 
     def _between_pads(self, env) -> float:
         """How much of the finger pads the debris would meet if they closed now (its parts' overlaps, at most 1)."""

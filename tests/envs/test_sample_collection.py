@@ -152,6 +152,7 @@ def test_shared_observations_start_at_the_expected_values():
     for _ in range(15):
         obs, *_ = env.step(torch.zeros(1, 7))
     assert obs["extra"]["time_remaining"].item() == pytest.approx(1 - 15 / 150)
+    assert env.unwrapped.steps_remaining().tolist() == [150 - 15]
     env.close()
 
 
