@@ -1551,7 +1551,8 @@ def _multi_peg_oracle_planning_with(monkeypatch, inserter, obstacles=lambda env,
     monkeypatch.setattr(oracle, "make_solver", lambda env, obstacles: solvers.append(obstacles))
     monkeypatch.setattr(oracle, "_obstacles", obstacles)
     monkeypatch.setattr(oracle, "_lift_height", lambda env, hole, seated=None: 0.3)
-    oracle._modules_with_margin = [np.full((1, 3), float(module)) for module in range(4)]  # made by ``plan``
+    oracle._wide_modules = None  # made by ``plan``, as is:
+    oracle._modules_with_margin = [np.full((1, 3), float(module)) for module in range(4)]
     return oracle
 
 
@@ -1578,9 +1579,9 @@ def test_the_multi_peg_oracle_takes_the_first_peg_whose_insertion_can_start(monk
 
     solvers = []
     oracle = _multi_peg_oracle_planning_with(monkeypatch, FakeInserter, obstacles=lambda env, modules, hole, standing, seated=None: (hole, standing), solvers=solvers)
-    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: True)
+    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, standing, first, then: True)
     env = SimpleNamespace(pegs=[None] * 4)
-    hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, None, list(standing))
+    hole, insertion = oracle._first_plannable_insertion(env, [None] * 4, list(standing))
     assert hole == chosen and list(insertion) == [("first action of", chosen), ("second action of", chosen)]
     assert solvers[-1] == (chosen, tuple(standing))  # the planner of the peg chosen, with the pegs standing as obstacles
     # pushed in among the modules beside its hole's (``NEIGHBOUR_MARGIN`` out; here each module's one point)
@@ -1606,8 +1607,8 @@ def test_of_the_last_two_pegs_the_multi_peg_oracle_inserts_first_the_one_that_le
 
     oracle = _multi_peg_oracle_planning_with(monkeypatch, FakeInserter)
     could = {(1, 2): last_after_other, (2, 1): other_after_last}
-    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, wide_modules, standing, first, then: could[(first, then)])
-    hole, insertion = oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0, 3])
+    monkeypatch.setattr(oracle, "_could_start_after", lambda env, modules, standing, first, then: could[(first, then)])
+    hole, insertion = oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, [0, 3])
     assert hole == chosen and list(insertion) == [("first action of", chosen)]
 
 
@@ -1650,7 +1651,7 @@ def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(
 
     oracle = _multi_peg_oracle_planning_with(monkeypatch, NeverStarts)
     with pytest.raises(PlanningFailed, match="no grasp of peg 3"):
-        oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, None, [0])
+        oracle._first_plannable_insertion(SimpleNamespace(pegs=[None] * 4), [None] * 4, [0])
 
 
 @pytest.mark.parametrize("tcp_speed_limit, ends_once_seated, ends_early", [(None, False, False), (None, True, True), (0.25, False, True)])

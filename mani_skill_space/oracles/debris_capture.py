@@ -114,7 +114,8 @@ class DebrisCaptureOracle(Oracle):
         if self.gripper != GRIPPER_CLOSED and self._tilt == 0.0:  # until they close, keep the fingers across it
             self._grip_orientation = self._across(meeting, self._long_axis(env, 0.0))
         catch_up = min(distance / CATCH_TIME, CATCH_SPEED) * gap / max(distance, 1e-9)
-        return sapien.Pose(hand + velocity * (lead or env.control_timestep) + catch_up * env.control_timestep, self._grip_orientation)
+        lead = env.control_timestep if lead is None else lead
+        return sapien.Pose(hand + velocity * lead + catch_up * env.control_timestep, self._grip_orientation)
 
     def _between_pads(self, env) -> float:
         """How much of the finger pads the debris would meet if they closed now (its parts' overlaps, at most 1)."""

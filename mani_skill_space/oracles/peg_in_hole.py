@@ -106,7 +106,7 @@ class MultiPegInHoleOracle(Oracle):
         modules = [np.eye(4) for _ in env.pegs]
         for module, position in zip(modules, env.module_positions):
             module[:3, 3] = position
-        wide_modules = np.concatenate(
+        self._wide_modules = np.concatenate(
             [surface_points(env.hole_assets[i][0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN) for i, module in enumerate(modules)]
         )
         self._modules_with_margin = [
@@ -114,7 +114,7 @@ class MultiPegInHoleOracle(Oracle):
         ]
         standing: list[int] = []
         while len(standing) < len(MULTI_INSERTION_ORDER):
-            hole, insertion = self._first_plannable_insertion(env, modules, wide_modules, standing)
+            hole, insertion = self._first_plannable_insertion(env, modules, standing)
             yield from insertion
             standing.append(hole)
             yield from self.open_gently(8)
@@ -123,7 +123,7 @@ class MultiPegInHoleOracle(Oracle):
                 raise PlanningFailed(f"peg {hole} did not stay in its hole")
         yield from self.wait_for_success(20)
 
-    def _first_plannable_insertion(self, env, modules: list, wide_modules: np.ndarray, standing: list) -> tuple[int, Iterator[np.ndarray]]:
+    def _first_plannable_insertion(self, env, modules: list, standing: list) -> tuple[int, Iterator[np.ndarray]]:
         """The next peg to insert and its insertion (actions), its first action already planned: the first peg not yet
         ``standing``, in ``MULTI_INSERTION_ORDER``, whose insertion can start from where the arm and the pegs are now.
         A peg lying beside another can be out of reach until that one is gone: on the tuning seeds, the hand tilted
@@ -135,11 +135,11 @@ class MultiPegInHoleOracle(Oracle):
         waiting = [hole for hole in MULTI_INSERTION_ORDER if hole not in standing]
         if len(waiting) == 2:
             first, last = waiting
-            if not self._could_start_after(env, modules, wide_modules, standing, first, last) and self._could_start_after(env, modules, wide_modules, standing, last, first):
+            if not self._could_start_after(env, modules, standing, first, last) and self._could_start_after(env, modules, standing, last, first):
                 waiting.reverse()
         failures = []
         for hole in waiting:
-            insertion = self._insertion(env, modules, wide_modules, hole, standing)
+            insertion = self._insertion(env, modules, hole, standing)
             try:
                 first_action = next(insertion)
             except PlanningFailed as failure:  # nothing has moved yet: try the next peg
@@ -148,21 +148,23 @@ class MultiPegInHoleOracle(Oracle):
             return hole, itertools.chain([first_action], insertion)
         raise failures[0]
 
-    def _insertion(self, env, modules: list, wide_modules: np.ndarray, hole: int, standing: list, seated: Optional[dict] = None) -> Iterator[np.ndarray]:
+    def _insertion(self, env, modules: list, hole: int, standing: list, seated: Optional[dict] = None) -> Iterator[np.ndarray]:
         """Peg ``hole``'s insertion (actions, planned as they are asked for), with the modules and the other pegs as
-        the planner's obstacles (``_obstacles``; ``seated``: pegs at each of these poses instead of where they are)."""
+        the planner's obstacles (``_obstacles``; ``seated``: pegs at each of these poses instead of where they are), the
+        modules with ``MODULE_MARGIN`` for taking and carrying it and those beside its hole's with ``NEIGHBOUR_MARGIN``
+        for pushing it in (both made by ``plan``)."""
         self.make_solver(env, obstacles=self._obstacles(env, modules, hole, tuple(standing), seated))
         settings = replace(MULTI_PEG_INSERTION, lift_height=self._lift_height(env, hole, seated))
         beside = np.concatenate([points for i, points in enumerate(self._modules_with_margin) if i != hole])
-        return PegInserter(self, settings, reach_obstacles=wide_modules, push_obstacles=beside).insert(PegTarget.of(env, env.pegs[hole], hole))
+        return PegInserter(self, settings, reach_obstacles=self._wide_modules, push_obstacles=beside).insert(PegTarget.of(env, env.pegs[hole], hole))
 
-    def _could_start_after(self, env, modules: list, wide_modules: np.ndarray, standing: list, first: int, then: int) -> bool:
+    def _could_start_after(self, env, modules: list, standing: list, first: int, then: int) -> bool:
         """Whether peg ``then``'s insertion could start from where the arm is now if peg ``first`` stood seated in its
         hole too, at whichever twist its insertion takes (``seated_poses``, all of them as obstacles: planned with the
         twist that differed, half a turn, from the one the peg went in with, seed 62033's last peg had a plan it then
         did not have). The arm will have moved by then, but what the standing pegs block is the swing over the hole
         and the push, wherever the arm starts."""
-        insertion = self._insertion(env, modules, wide_modules, then, [*standing, first], {first: seated_poses(env, first, self.solver.base_pose.p)})
+        insertion = self._insertion(env, modules, then, [*standing, first], {first: seated_poses(env, first, self.solver.base_pose.p)})
         try:
             next(insertion)
         except PlanningFailed:
