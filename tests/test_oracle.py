@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import Oracle, PlanningFailed, _finger_box_corners, _trapezoid
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, _finger_box_corners, _trapezoid
 from mani_skill_space.oracles.debris_capture import FAST_SWING
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
@@ -91,20 +91,44 @@ def test_oracle_swings_briskly_to_debris_it_cannot_meet_at_the_usual_pace():
     assert oracle.swing_acceleration == FAST_SWING
 
 
-@pytest.mark.parametrize("seed", [63100, 63112])  # tuning seeds: both failed before the chase
-def test_oracle_chases_debris_that_bounced_off_the_open_hand(seed):
-    """A 200 mm peg (63100) and a 3U CubeSat (63112) strike the waiting hand and drift off slower; the hand, moving
-    with them from where its drives left it, falls behind and the fingers never close. The chase, its target ahead
-    of the hand by the drives' lag, catches up with them and takes them."""
+def _debris_episode_with_phases(seed: int):
+    """An orbital dataset Debris Capture episode of the oracle, with the phase and gripper command of every action."""
     env = gym.make("DebrisCapture-v1", domain="orbit", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
     oracle = oracle_for("DebrisCapture-v1")
-    phases = []
+    steps = []
     act = oracle.act
-    oracle.act = lambda obs: (act(obs), phases.append(oracle.phase))[0]
+    oracle.act = lambda obs: (act(obs), steps.append((oracle.phase, oracle.gripper)))[0]
     result = run_episode(env, oracle, seed)
     env.close()
+    return result, [phase for phase, _ in steps], [gripper for _, gripper in steps]
+
+
+@pytest.mark.parametrize("seed", [63100, 63011])  # tuning seeds: both failed before the chase
+def test_oracle_chases_debris_that_bounced_off_the_open_hand(seed):
+    """A 200 mm peg strikes the waiting hand and drifts off slower; the hand, moving with it from where its drives
+    left it, falls behind and the fingers never close. The chase, its target ahead of the hand by the drives' lag,
+    catches up with it and takes it."""
+    result, phases, _ = _debris_episode_with_phases(seed)
     assert result.success_at_end, (seed, result.failure)
     assert "chase" in phases
+
+
+@pytest.mark.parametrize("seed", [63013, 63037])  # tuning seeds: both failed ("the debris did not arrive") before
+def test_oracle_chases_debris_that_struck_the_arm_before_it_arrived(seed):
+    """A 200 mm peg strikes the arm short of the waiting hand and drifts off past it; the oracle chases it at once,
+    without the follow meant for debris that came to the hand."""
+    result, phases, _ = _debris_episode_with_phases(seed)
+    assert result.success_at_end, (seed, result.failure)
+    assert "chase" in phases and "follow" not in phases
+
+
+def test_oracle_opens_the_fingers_again_when_they_closed_on_nothing():
+    """Tuning seed 63016 (a 3U CubeSat; it failed before): the fingers close as the tumbling CubeSat brushes one of
+    them, and it is pushed out from between them; the oracle opens them again, chases it and takes it."""
+    result, phases, grippers = _debris_episode_with_phases(63016)
+    assert result.success_at_end, result.failure
+    closed_then_open = [i for i in range(1, len(grippers)) if grippers[i - 1] == GRIPPER_CLOSED and grippers[i] == GRIPPER_OPEN]
+    assert closed_then_open and phases[closed_then_open[0]] == "chase"
 
 
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back

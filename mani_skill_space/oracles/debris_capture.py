@@ -1,11 +1,12 @@
 """Oracle for DebrisCapture-v1: predict the debris' ballistic path and put the open hand on it ahead of the
 debris, fingers facing it, by an arm motion that keeps every link out of the debris' way until it reaches the
 hand; as it comes close, move the hand with it (so the fingers close on an object at
-rest relative to them), close, keep moving with it while braking gently to a stop, and hold still."""
+rest relative to them), close, keep moving with it while braking gently to a stop, and hold still. Debris that gets
+away (bounces off the hand or the arm, or slips from fingers that closed on its rim) is chased, the fingers open."""
 
 from __future__ import annotations
 
-from typing import Callable, Iterator, Optional
+from typing import Callable, Generator, Iterator, Optional
 
 import numpy as np
 import sapien
@@ -13,7 +14,7 @@ import torch
 from mplib.pymp.collision_detection import fcl
 
 from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT, tumbling_rotations
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, JOINT_ACCELERATION_LIMIT, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
+from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, JOINT_ACCELERATION_LIMIT, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
 
 EARLIEST_MEETING = 0.8
 TIME_STEP = 0.1
@@ -37,6 +38,9 @@ CHASE_LEAD = 0.15
 the hand moves as fast as it is asked to (a target one step ahead of a hand that lags two moves it at half that)."""
 RESERVED_STEPS = 30
 """Control steps the chase leaves at the end of the episode for the fingers to close, the brake and the calm hold."""
+CHASE_CATCH_SPEED = 0.15
+"""How fast (m/s) the chase closes in on the debris: a debris that got away moves off rather than into the hand, so the
+chase must close faster than the follow (``CATCH_SPEED``) to reach it before it leaves the arm's reach."""
 CLOSED_FOLLOW_STEPS = 6
 CATCH_SPEED = 0.08
 """How fast (m/s) the debris may close in on the hand while the hand moves with it."""
@@ -72,22 +76,33 @@ class DebrisCaptureOracle(Oracle):
         self.make_solver(env)
         meeting, arm = self._meeting_point(env)
         yield from self.joint_move(arm, "meeting", acceleration=self.swing_acceleration)
-        yield from self._wait_for_debris(env, meeting)
+        arrived = yield from self._wait_for_debris(env, meeting)
         self._grip_orientation = meeting.q
-        yield from self._follow_debris(env, meeting)
+        yield from self._follow_debris(env, meeting, arrived)
         yield from self._brake(env)
         yield from self.wait_for_success(HOLD_STEPS)
 
-    def _follow_debris(self, env, meeting: sapien.Pose) -> Iterator[np.ndarray]:
-        """Move with the debris until the fingers have closed on it (for a few steps) or ``MOST_FOLLOW_STEPS`` have
-        passed; where they are still open then (the debris struck the hand and bounced off slower, and the hand,
-        moving with it from where its drives left it, fell behind), chase it: the same motion with the target
-        ``CHASE_LEAD`` ahead of the hand, which makes up the drives' lag, until the fingers have closed on it or only
-        ``RESERVED_STEPS`` are left."""
-        yield from self._until_held(lambda step: self._on_debris(env, meeting), "follow", lambda step: step < MOST_FOLLOW_STEPS)
+    def _follow_debris(self, env, meeting: sapien.Pose, arrived: bool = True) -> Iterator[np.ndarray]:
+        """Where the debris ``arrived`` at the hand, move with it until the fingers have closed on it (for a few steps)
+        or ``MOST_FOLLOW_STEPS`` have passed. Where they do not hold it then (the debris struck the hand and bounced off
+        slower, and the hand, moving with it from where its drives left it, fell behind; or the fingers closed on the
+        rim of a tumbling body that swept on), or where it never arrived (it struck the arm and drifted off before it
+        came to the hand), chase it: the same motion with the target ``CHASE_LEAD`` ahead of the hand, which makes up
+        the drives' lag, closing in at ``CHASE_CATCH_SPEED``, with the fingers opened again, until they hold it or
+        only ``RESERVED_STEPS`` are left."""
+        if arrived:
+            yield from self._until_held(lambda step: self._on_debris(env, meeting), "follow", lambda step: step < MOST_FOLLOW_STEPS)
+        chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD, catch_speed=CHASE_CATCH_SPEED)  # noqa: E731
+        time_left = lambda step=0: int(env.steps_remaining()[0]) > RESERVED_STEPS  # noqa: E731
+        while not self._holding(env) and time_left():
+            self.gripper = GRIPPER_OPEN
+            yield from self._until_held(chase, "chase", time_left)
         if self.gripper != GRIPPER_CLOSED:
-            chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD)  # noqa: E731
-            yield from self._until_held(chase, "chase", lambda step: int(env.steps_remaining()[0]) > RESERVED_STEPS)
+            raise PlanningFailed("the debris got away from the chasing hand")
+
+    def _holding(self, env) -> bool:
+        """Whether the fingers are closed and the debris is grasped."""
+        return self.gripper == GRIPPER_CLOSED and bool(env.is_grasping(env.debris)[0])
 
     def _until_held(self, target: Callable[[int], sapien.Pose], what: str, going: Callable[[int], bool]) -> Iterator[np.ndarray]:
         """Servo to ``target`` while ``going(step)`` holds, until the fingers have been closed ``CLOSED_FOLLOW_STEPS``."""
@@ -100,11 +115,11 @@ class DebrisCaptureOracle(Oracle):
             yield from self.servo(target, 1, what)
             step += 1
 
-    def _on_debris(self, env, meeting: sapien.Pose, lead: Optional[float] = None) -> sapien.Pose:
-        """The hand's next position: moving with the debris, letting it come closer at most CATCH_SPEED (so it
-        glides between the fingers instead of being hit); the fingers close once its centre is between them. The
-        target is ``lead`` seconds of the debris' motion ahead of the hand (one control step unless given), and one
-        step of the closing in."""
+    def _on_debris(self, env, meeting: sapien.Pose, lead: Optional[float] = None, catch_speed: float = CATCH_SPEED) -> sapien.Pose:
+        """The hand's next position: moving with the debris, letting it come closer at most ``catch_speed`` (the
+        follow's ``CATCH_SPEED``, so that it glides between the fingers instead of being hit); the fingers close once
+        its centre is between them. The target is ``lead`` seconds of the debris' motion ahead of the hand (one
+        control step unless given), and one step of the closing in."""
         position, velocity = self._debris_state(env)
         hand = self._tcp_position()
         gap = position - hand
@@ -113,7 +128,7 @@ class DebrisCaptureOracle(Oracle):
             self.gripper = GRIPPER_CLOSED
         if self.gripper != GRIPPER_CLOSED and self._tilt == 0.0:  # until they close, keep the fingers across it
             self._grip_orientation = self._across(meeting, self._long_axis(env, 0.0))
-        catch_up = min(distance / CATCH_TIME, CATCH_SPEED) * gap / max(distance, 1e-9)
+        catch_up = min(distance / CATCH_TIME, catch_speed) * gap / max(distance, 1e-9)
         lead = env.control_timestep if lead is None else lead
         return sapien.Pose(hand + velocity * lead + catch_up * env.control_timestep, self._grip_orientation)
 
@@ -247,16 +262,22 @@ class DebrisCaptureOracle(Oracle):
             self._radius_of, self._radius = env.debris, float(np.linalg.norm(get_actor_obb(env.debris).primitive.extents)) / 2
         return self._radius
 
-    def _wait_for_debris(self, env, meeting: sapien.Pose) -> Iterator[np.ndarray]:
-        """Hold the open hand still at the meeting pose until the debris is close. On a free-flying servicer the
-        swing there has moved and turned the bus (a few centimetres and degrees, enough to put the hand beside the
-        debris' path), so the hand is servoed back onto the meeting pose, planned from where the bus is now."""
+    def _wait_for_debris(self, env, meeting: sapien.Pose) -> Generator[np.ndarray, None, bool]:
+        """Hold the open hand still at the meeting pose until the debris is close: True once it has arrived (its
+        centre near the grasp point, or touching the hand), False once it moves away from the hand within reach of it
+        without having arrived (it struck the arm, or passed beside the hand). On a free-flying servicer the swing
+        there has moved and turned the bus (a few centimetres and degrees, enough to put the hand beside the debris'
+        path), so the hand is servoed back onto the meeting pose, planned from where the bus is now."""
         self.phase = "waiting for the debris"
         free_flyer = getattr(env, "free_flyer", False)
+        within_reach = self._debris_radius(env) + HAND_LENGTH
         for _ in range(int(LATEST_MEETING / env.control_timestep)):
-            position, _ = self._debris_state(env)
-            if np.linalg.norm(position - self._tcp_position()) < FOLLOW_DISTANCE or self._touching(env):
-                return
+            position, velocity = self._debris_state(env)
+            gap = position - self._tcp_position()
+            if np.linalg.norm(gap) < FOLLOW_DISTANCE or self._touching(env):
+                return True
+            if np.linalg.norm(gap) < within_reach and gap @ velocity > 0:
+                return False
             if free_flyer:
                 yield from self.servo(lambda _: meeting, 1, "meeting")
             else:
