@@ -82,7 +82,7 @@ class DebrisCaptureOracle(Oracle):
         yield from self._brake(env)
         yield from self.wait_for_success(HOLD_STEPS)
 
-    def _follow_debris(self, env, meeting: sapien.Pose, arrived: bool = True) -> Iterator[np.ndarray]:
+    def _follow_debris(self, env, meeting: sapien.Pose, arrived: bool) -> Iterator[np.ndarray]:
         """Where the debris ``arrived`` at the hand, move with it until the fingers have closed on it (for a few steps)
         or ``MOST_FOLLOW_STEPS`` have passed. Where they do not hold it then (the debris struck the hand and bounced off
         slower, and the hand, moving with it from where its drives left it, fell behind; or the fingers closed on the
