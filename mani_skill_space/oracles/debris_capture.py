@@ -274,9 +274,10 @@ class DebrisCaptureOracle(Oracle):
         for _ in range(int(LATEST_MEETING / env.control_timestep)):
             position, velocity = self._debris_state(env)
             gap = position - self._tcp_position()
-            if np.linalg.norm(gap) < FOLLOW_DISTANCE or self._touching(env):
+            distance = float(np.linalg.norm(gap))
+            if distance < FOLLOW_DISTANCE or self._touching(env):
                 return True
-            if np.linalg.norm(gap) < within_reach and gap @ velocity > 0:
+            if distance < within_reach and gap @ velocity > 0:
                 return False
             if free_flyer:
                 yield from self.servo(lambda _: meeting, 1, "meeting")
