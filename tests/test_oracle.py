@@ -876,13 +876,14 @@ def test_the_insertion_plans_grasps_whose_lift_goes_straight_up_first():
     three other failures on the tuning seeds); the grasps whose lift goes straight up are planned first."""
     from mani_skill_space.oracles.base import at_height, backed_off
     from mani_skill_space.oracles.insertion import PRE_GRASP_DISTANCE, PegTarget
-    from mani_skill_space.oracles.solar_panel import INSERTION_ORDER, PEG_INSERTION
+    from mani_skill_space.envs.solar_panel_assembly import FILL_ORDER
+    from mani_skill_space.oracles.solar_panel import PEG_INSERTION
 
     env = gym.make("SolarPanelAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
     env.reset(seed=64019)
     oracle = oracle_for("SolarPanelAssembly-v1")
     oracle.reset(env, 64019)
-    scene, socket = env.unwrapped, INSERTION_ORDER[0]
+    scene, socket = env.unwrapped, FILL_ORDER[0]
     oracle.make_solver(scene, obstacles=oracle._obstacles(scene, exclude_peg=socket))
     inserter = PegInserter(oracle, PEG_INSERTION)
     target = PegTarget.of(scene, scene.pegs[socket], socket)

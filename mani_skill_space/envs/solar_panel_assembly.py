@@ -59,6 +59,9 @@ SEAT_DISTANCE_TOLERANCE = 0.01
 SEAT_ANGLE_TOLERANCE = np.radians(5.0)
 PANEL_LIFT_BAND = (0.03, 0.5)
 SOCKET_COUNT = len(SOCKET_OFFSETS)
+FILL_ORDER = (2, 3, 0, 1)
+"""The order the sockets are best filled in: the farther (short) ones first, so that the hand never reaches over a
+standing peg. The oracle's order, and the one the state observation's next peg follows."""
 
 PEG_TERMS = insertion_terms(prefix="peg_")
 """Peg-in-Hole's terms, for the peg nearest to going in."""
@@ -144,6 +147,10 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     seated panel: the part is pulled into its seat as hard as 1 g would, its motion damped
     (`envs.insertion.latch_force`), so that in orbit released parts stay where they were put. Nothing that is
     not inserted (or seated) is captured.
+
+    **State observation:** every peg's pose and its target socket (its own, else the other of its length) seen from
+    the peg's end, as Peg-in-Hole observes its hole; and the same for the next peg (`next_*`: the one in the hand,
+    else the first in `FILL_ORDER` not yet inserted), so that a policy finds the peg it is placing in one place.
 
     **Reward:** staged, so that progress is monotone: 169 per filled socket (`pegs_inserted`), plus
     Peg-in-Hole's dense terms (reach 1, grasp 4, lift 8, axis 8, twist 4, entrance 16, bottom 128, each below
@@ -286,6 +293,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         all_filled = sockets_filled == SOCKET_COUNT
         seat_distance, seat_angle, panel_seated = self._seat_error()
         panel_grasped = self.is_grasping(self.panel)
+        pegs_grasped = torch.stack([self.is_grasping(peg) for peg in self.pegs], dim=1)
         panel_lift = self.panel_seat()[:, 2, 3] - self._panel_start_height
         panel_lifted = panel_lift >= PANEL_LIFT_BAND[0]
         success = all_filled & panel_seated & ~panel_grasped
@@ -298,6 +306,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             sockets_filled=sockets_filled,
             panel_seated=panel_seated,
             panel_grasped=panel_grasped,
+            pegs_grasped=pegs_grasped,
             panel_lift=panel_lift,
             seat_distance=seat_distance,
             seat_angle=seat_angle,
@@ -328,6 +337,8 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             handle = self.panel_handle()
             handle_position, handle_rotation = relative_pose(tcp_position, tcp_rotation, handle[:, :3, 3], handle[:, :3, :3])
             socket_entrance, socket_bottom, socket_rotation = self._target_sockets_in_peg_ends(info)
+            rows, grasped = torch.arange(n, device=self.device), info["pegs_grasped"]
+            next_peg = self._next_peg(grasped, info["peg_inserted"])
             seat = self.panel_seat()
             target_position, target_rotation = relative_pose(seat[:, :3, 3], seat[:, :3, :3], self.panel_target[:, :3, 3], self.panel_target[:, :3, :3])
             obs.update(
@@ -337,6 +348,13 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
                 target_entrances_in_peg_ends=socket_entrance.reshape(n, -1),
                 target_bottoms_in_peg_ends=socket_bottom.reshape(n, -1),
                 target_sockets_rot6d_in_peg_ends=rotation_6d(socket_rotation).reshape(n, -1),
+                next_peg=torch.nn.functional.one_hot(next_peg, SOCKET_COUNT).float(),
+                next_peg_grasped=grasped[rows, next_peg].float().unsqueeze(-1),
+                next_peg_pos_in_tcp=peg_position[rows, next_peg],
+                next_peg_rot6d_in_tcp=rotation_6d(peg_rotation[rows, next_peg]),
+                next_entrance_in_peg_end=socket_entrance[rows, next_peg],
+                next_bottom_in_peg_end=socket_bottom[rows, next_peg],
+                next_socket_rot6d_in_peg_end=rotation_6d(socket_rotation[rows, next_peg]),
                 peg_inserted=info["peg_inserted"].float(),
                 socket_depth=self.insertion.hole_depth[:, :1],
                 symmetry_order=self.insertion.symmetry_order[:, :1].float(),
@@ -346,6 +364,16 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
                 target_rot6d_in_seat=rotation_6d(target_rotation),
             )
         return obs
+
+    def _next_peg(self, grasped: torch.Tensor, inserted: torch.Tensor) -> torch.Tensor:
+        """(n,) the peg being placed: the one in the hand, else the first in ``FILL_ORDER`` not yet inserted (the last
+        in it once all are), from ``grasped`` and ``inserted`` (n, 4)."""
+        rank = torch.empty(SOCKET_COUNT, dtype=torch.long, device=self.device)
+        rank[list(FILL_ORDER)] = torch.arange(SOCKET_COUNT, device=self.device)
+        waiting = (~inserted) * (SOCKET_COUNT - rank)  # 4 for the first in the order .. 1 for the last, 0 if in
+        last = rank == SOCKET_COUNT - 1
+        score = (4 * SOCKET_COUNT) * grasped.long() + 2 * waiting + last.long()
+        return score.argmax(dim=1)
 
     def _target_sockets_in_peg_ends(self, info: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """For each peg, its target socket (``target_sockets``) seen from the peg's end nearest that socket's
@@ -382,7 +410,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         target = self.target_sockets(info)
         pair = lambda key: info[f"pair_{key}"][rows, torch.arange(SOCKET_COUNT, device=self.device)[None], target]  # noqa: E731
         positions = torch.stack([peg.pose.p for peg in self.pegs], dim=1)
-        grasped = torch.stack([self.is_grasping(peg) for peg in self.pegs], dim=1)
+        grasped = info["pegs_grasped"]
         measures = {key: pair(key) for key in ("axis_angle", "twist_error", "tip_to_entrance", "tip_to_bottom")}
         inputs = insertion_inputs(self.agent.tcp.pose.p[:, None], positions, grasped.float(), self._peg_start_height, measures)
         inputs = {f"peg_{name}": value for name, value in inputs.items()}

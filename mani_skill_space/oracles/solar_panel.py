@@ -14,11 +14,10 @@ from typing import Iterator
 import numpy as np
 import sapien
 
+from mani_skill_space.envs.solar_panel_assembly import FILL_ORDER
 from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, Oracle, PlanningFailed, backed_off, box_held_in_hand, raised, surface_points
 from mani_skill_space.oracles.insertion import SETTLE_STEPS, InsertionSettings, PegInserter, PegTarget, other_pegs, stayed_in
 
-INSERTION_ORDER = (2, 3, 0, 1)
-"""Sockets in the order they are filled: the farther (short) ones first."""
 RETREAT_DISTANCE = 0.2
 """After letting go of a peg (or the panel) the hand goes straight up this far (backing out along a tilted
 approach would drag a long peg over), well clear of the pegs' tops before it moves sideways: the planner's
@@ -93,7 +92,7 @@ class SolarPanelOracle(Oracle):
 
     def plan(self, env) -> Iterator[np.ndarray]:
         inserter = PegInserter(self, PEG_INSERTION)
-        for socket in INSERTION_ORDER:
+        for socket in FILL_ORDER:
             target = PegTarget.of(env, env.pegs[socket], socket)
             self.make_solver(env, obstacles=self._obstacles(env, exclude_peg=socket))
             yield from inserter.insert(target)
@@ -114,7 +113,7 @@ class SolarPanelOracle(Oracle):
         base = np.eye(4)
         base[:3, 3] = env.socket_base.pose.p[0].cpu().numpy()
         points = [surface_points(env.socket_assets[0], base)]
-        standing = INSERTION_ORDER[: INSERTION_ORDER.index(exclude_peg)] if exclude_peg >= 0 else INSERTION_ORDER
+        standing = FILL_ORDER[: FILL_ORDER.index(exclude_peg)] if exclude_peg >= 0 else FILL_ORDER
         points.append(other_pegs(env.pegs, env.peg_assets[0], exclude_peg, standing))
         if exclude_peg >= 0:
             points.append(surface_points(env.panel_assets[0], env.panel.pose.sp.to_transformation_matrix()))

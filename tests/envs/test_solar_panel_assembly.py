@@ -1,3 +1,5 @@
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -5,7 +7,7 @@ import sapien
 import torch
 
 from mani_skill_space.envs import SolarPanelAssemblyEnv
-from mani_skill_space.envs.solar_panel_assembly import PANEL_START_XY, PEG_REST_XY, REWARD_TABLE
+from mani_skill_space.envs.solar_panel_assembly import FILL_ORDER, PANEL_START_XY, PEG_REST_XY, REWARD_TABLE
 from mani_skill_space.geometry import rotation_6d
 
 ENV_ID = "SolarPanelAssembly-v1"
@@ -182,8 +184,49 @@ def test_state_observations():
         ("target_pos_in_seat", 3),
         ("target_rot6d_in_seat", 6),
         ("wrist_wrench", 6),
+        ("next_peg", 4),
+        ("next_peg_grasped", 1),
+        ("next_peg_pos_in_tcp", 3),
+        ("next_peg_rot6d_in_tcp", 6),
+        ("next_entrance_in_peg_end", 3),
+        ("next_bottom_in_peg_end", 3),
+        ("next_socket_rot6d_in_peg_end", 6),
     ]:
         assert extra[key].shape == (1, size), key
+    env.close()
+
+
+def test_next_peg_is_the_held_one_else_the_first_waiting_in_fill_order():
+    """Batched over 8 synthetic envs: a held peg is next whatever is inserted; else the first of FILL_ORDER (2, 3, 0,
+    1) not yet inserted; once all are in, the last of the order."""
+    grasped = torch.zeros(8, 4, dtype=torch.bool)
+    inserted = torch.zeros(8, 4, dtype=torch.bool)
+    inserted[1, 2] = True
+    inserted[2, [2, 3]] = True
+    inserted[3, [2, 3, 0]] = True
+    inserted[4] = True
+    grasped[5, 0] = True
+    grasped[6, 3] = True
+    inserted[6, 2] = True
+    inserted[7, [3, 0]] = True  # 2 waits (a peg that came out): it is next again
+    scene = SimpleNamespace(device=torch.device("cpu"))
+    assert FILL_ORDER == (2, 3, 0, 1)
+    assert SolarPanelAssemblyEnv._next_peg(scene, grasped, inserted).tolist() == [2, 3, 0, 1, 1, 0, 3, 2]
+
+
+def test_next_peg_observation_repeats_that_pegs_own_slots():
+    env = make(obs_mode="state_dict")
+    env.reset(seed=0)
+    _insert(env, 2)
+    u = env.unwrapped
+    extra = u.get_obs(u.get_info())["extra"]
+    assert extra["next_peg"][0].tolist() == [0.0, 0.0, 0.0, 1.0]  # 2 is in: 3 is next
+    assert extra["next_peg_grasped"].item() == 0.0
+    assert torch.equal(extra["next_peg_pos_in_tcp"][0], extra["pegs_pos_in_tcp"].reshape(4, 3)[3])
+    assert torch.equal(extra["next_peg_rot6d_in_tcp"][0], extra["pegs_rot6d_in_tcp"].reshape(4, 6)[3])
+    assert torch.equal(extra["next_entrance_in_peg_end"][0], extra["target_entrances_in_peg_ends"].reshape(4, 3)[3])
+    assert torch.equal(extra["next_bottom_in_peg_end"][0], extra["target_bottoms_in_peg_ends"].reshape(4, 3)[3])
+    assert torch.equal(extra["next_socket_rot6d_in_peg_end"][0], extra["target_sockets_rot6d_in_peg_ends"].reshape(4, 6)[3])
     env.close()
 
 
