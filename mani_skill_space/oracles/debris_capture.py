@@ -2,7 +2,8 @@
 debris, fingers facing it, by an arm motion that keeps every link out of the debris' way until it reaches the
 hand; as it comes close, move the hand with it (so the fingers close on an object at
 rest relative to them), close, keep moving with it while braking gently to a stop, and hold still. Debris that gets
-away (bounces off the hand or the arm, or slips from fingers that closed on its rim) is chased, the fingers open."""
+away (bounces off the hand or the arm, slips from fingers that closed on its rim, or slips out of them as the hand
+brakes) is chased, the fingers open."""
 
 from __future__ import annotations
 
@@ -80,6 +81,9 @@ class DebrisCaptureOracle(Oracle):
         self._grip_orientation = meeting.q
         yield from self._follow_debris(env, meeting, arrived)
         yield from self._brake(env)
+        while not self._holding(env) and self._time_left(env):  # it slipped out of the fingers as they braked: chase it again
+            yield from self._follow_debris(env, meeting, arrived=False)
+            yield from self._brake(env)
         yield from self.wait_for_success(HOLD_STEPS)
 
     def _follow_debris(self, env, meeting: sapien.Pose, arrived: bool) -> Iterator[np.ndarray]:
@@ -93,12 +97,16 @@ class DebrisCaptureOracle(Oracle):
         if arrived:
             yield from self._until_held(lambda step: self._on_debris(env, meeting), "follow", lambda step: step < MOST_FOLLOW_STEPS)
         chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD, catch_speed=CHASE_CATCH_SPEED)  # noqa: E731
-        time_left = lambda step=0: int(env.steps_remaining()[0]) > RESERVED_STEPS  # noqa: E731
-        while not self._holding(env) and time_left():
+        while not self._holding(env) and self._time_left(env):
             self.gripper = GRIPPER_OPEN
-            yield from self._until_held(chase, "chase", time_left)
+            yield from self._until_held(chase, "chase", lambda step: self._time_left(env))
         if self.gripper != GRIPPER_CLOSED:
             raise PlanningFailed("the debris got away from the chasing hand")
+
+    @staticmethod
+    def _time_left(env) -> bool:
+        """Whether more than ``RESERVED_STEPS`` of the episode are left."""
+        return int(env.steps_remaining()[0]) > RESERVED_STEPS
 
     def _holding(self, env) -> bool:
         """Whether the fingers are closed and the debris is grasped."""
