@@ -148,8 +148,8 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     (`envs.insertion.latch_force`), so that in orbit released parts stay where they were put. Nothing that is
     not inserted (or seated) is captured.
 
-    **State observation:** every peg's pose and its target socket (its own, else the other of its length) seen from
-    the peg's end, as Peg-in-Hole observes its hole; and the same for the next peg (`next_*`: the one in the hand,
+    **State observation:** every peg's pose and its target socket (the one it is inserted in; else its own, unless
+    another peg fills it; else the other of its length) seen from the peg's end, as Peg-in-Hole observes its hole; and the same for the next peg (`next_*`: the one in the hand,
     else the first in `FILL_ORDER` not yet inserted), so that a policy finds the peg it is placing in one place.
 
     **Reward:** staged, so that progress is monotone: 169 per filled socket (`pegs_inserted`), plus
@@ -303,6 +303,7 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
             stage=sockets_filled + torch.where(all_filled, panel_stages, torch.zeros_like(panel_stages)),
             socket_filled=socket_filled,
             peg_inserted=in_socket.any(dim=2),
+            peg_in_socket=in_socket,
             sockets_filled=sockets_filled,
             panel_seated=panel_seated,
             panel_grasped=panel_grasped,
@@ -314,11 +315,14 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
         )
 
     def target_sockets(self, info: dict) -> torch.Tensor:
-        """(n, 4) the socket each peg should go to: its own if still empty, else the other of its length."""
-        own = torch.arange(SOCKET_COUNT, device=self.device).expand(self.num_envs, SOCKET_COUNT)
-        partner = torch.tensor([1, 0, 3, 2], device=self.device).expand(self.num_envs, SOCKET_COUNT)
-        own_filled = info["socket_filled"].gather(1, own)
-        return torch.where(own_filled, partner, own)
+        """(n, 4) the socket each peg should go to: the one it is inserted in, if any; else its own if no other peg
+        fills it; else the other of its length."""
+        in_socket = info["peg_in_socket"]  # (n, pegs, sockets)
+        own = torch.arange(SOCKET_COUNT, device=self.device).expand(len(in_socket), SOCKET_COUNT)
+        partner = torch.tensor([1, 0, 3, 2], device=self.device).expand(len(in_socket), SOCKET_COUNT)
+        own_filled_by_another = info["socket_filled"] & ~in_socket.diagonal(dim1=1, dim2=2)
+        target = torch.where(own_filled_by_another, partner, own)
+        return torch.where(in_socket.any(dim=2), in_socket.int().argmax(dim=2), target)
 
     # ------------------------------------------------------------------ observations
     def _get_obs_extra(self, info: dict):

@@ -235,7 +235,7 @@ def test_each_peg_observes_its_target_socket_from_its_end():
     env.reset(seed=0)
     u = env.unwrapped
     _insert(env, 2, lift=0.05)  # peg 2 held on its socket's axis, its end 5 cm (and _insert's 0.1 mm) above the bottom
-    _insert(env, 0)  # peg 0 in its socket: it now targets the other long socket
+    _insert(env, 0, peg=1)  # peg 1 in peg 0's socket: peg 0 now targets the other long socket
     extra = u.get_obs(u.get_info())["extra"]
     bottoms = extra["target_bottoms_in_peg_ends"].reshape(4, 3)
     entrances = extra["target_entrances_in_peg_ends"].reshape(4, 3)
@@ -244,6 +244,34 @@ def test_each_peg_observes_its_target_socket_from_its_end():
     assert torch.linalg.norm(bottoms[2]).item() == pytest.approx(0.0501, abs=1e-5)
     assert torch.linalg.norm(entrances[2]).item() == pytest.approx(0.0501 - depth, abs=1e-5)
     assert torch.allclose(rotations[2], rotation_6d(torch.eye(3)), atol=1e-4)
-    other_long_socket = u.insertion.hole_bottom[0, 1, :3, 3] - u.insertion.hole_bottom[0, 0, :3, 3]
-    assert torch.linalg.norm(bottoms[0]).item() == pytest.approx(torch.linalg.norm(other_long_socket).item(), abs=1e-3)
+    other_long_socket = u.insertion.hole_bottom[0, 1, :3, 3]
+    peg_0_ends = u.peg_end_frames()[0, 0, :, :3, 3]
+    distances = torch.linalg.norm(peg_0_ends - other_long_socket, dim=-1)
+    assert torch.linalg.norm(bottoms[0]).item() == pytest.approx(distances[u.get_info()["pair_peg_end"][0, 0, 1]].item(), abs=1e-4)
+    assert torch.linalg.norm(bottoms[1]).item() == pytest.approx(1e-4, abs=1e-5)  # peg 1 keeps the socket it is in
     env.close()
+
+
+def test_target_socket_is_the_one_a_peg_stands_in_else_its_own_unless_taken():
+    """Batched over 8 synthetic envs, ``in_socket[env, peg, socket]``: a peg inserted anywhere targets that socket;
+    one that is out targets its own socket unless another peg fills it, then the other of its length."""
+    in_socket = torch.zeros(8, 4, 4, dtype=torch.bool)
+    in_socket[1, 2, 2] = True  # 2 in its own socket: keeps it
+    in_socket[2, 3, 2] = True  # 3 in 2's socket: 3 keeps it, 2 targets 3's
+    in_socket[3, 0, 1] = True  # 0 in 1's socket: 0 keeps it, 1 targets 0's
+    in_socket[4] = torch.eye(4, dtype=torch.bool)  # all home
+    in_socket[5, 1, 0] = in_socket[5, 0, 1] = True  # swapped: each keeps the one it is in
+    in_socket[6, 2, 2] = in_socket[6, 1, 1] = True
+    in_socket[7, 3, 3] = in_socket[7, 1, 0] = True
+    info = dict(peg_in_socket=in_socket, socket_filled=in_socket.any(dim=1))
+    scene = SimpleNamespace(device=torch.device("cpu"))
+    assert SolarPanelAssemblyEnv.target_sockets(scene, info).tolist() == [
+        [0, 1, 2, 3],
+        [0, 1, 2, 3],
+        [0, 1, 3, 2],
+        [1, 0, 2, 3],
+        [0, 1, 2, 3],
+        [1, 0, 2, 3],
+        [0, 1, 2, 3],
+        [1, 0, 2, 3],
+    ]
