@@ -83,7 +83,7 @@ class InsertionPushExpert:
         if not held:
             return None
         peg = held[0]
-        if bool(info["peg_inserted"][0, peg]):  # in a socket (no longer its target, which has moved on): let go
+        if bool(info["peg_inserted"][0, peg]):  # in a socket: let go where it stands
             socket = int(info["pair_lateral_offset"][0, peg].argmin())
             return self._action(peg, int(info["pair_peg_end"][0, peg, socket]), socket, RELAXED_HEIGHT, GRIPPER_OPEN)
         socket = int(env.target_sockets(info)[0, peg])
