@@ -149,8 +149,9 @@ class SolarPanelAssemblyEnv(SocketClearance, SpaceManipulationEnv):
     not inserted (or seated) is captured.
 
     **State observation:** every peg's pose and its target socket (the one it is inserted in; else its own, unless
-    another peg fills it; else the other of its length) seen from the peg's end, as Peg-in-Hole observes its hole; and the same for the next peg (`next_*`: the one in the hand,
-    else the first in `FILL_ORDER` not yet inserted), so that a policy finds the peg it is placing in one place.
+    another peg fills it; else the other of its length) seen from the peg's end, as Peg-in-Hole observes its hole;
+    and the same for the next peg (`next_*`: the one in the hand, else the first in `FILL_ORDER` not yet
+    inserted), so that a policy finds the peg it is placing in one place.
 
     **Reward:** staged, so that progress is monotone: 169 per filled socket (`pegs_inserted`), plus
     Peg-in-Hole's dense terms (reach 1, grasp 4, lift 8, axis 8, twist 4, entrance 16, bottom 128, each below
