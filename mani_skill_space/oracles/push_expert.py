@@ -79,16 +79,15 @@ class InsertionPushExpert:
         """The expert's action in the state ``info`` describes (the env's last ``evaluate``), or None outside its
         region."""
         env = self.env
-        held = [i for i, peg in enumerate(env.pegs) if bool(env.is_grasping(peg)[0])]
-        if not held:
+        held = info["pegs_grasped"][0]
+        if not bool(held.any()):
             return None
-        peg = held[0]
-        if bool(info["peg_inserted"][0, peg]):  # in a socket: let go where it stands
-            socket = int(info["pair_lateral_offset"][0, peg].argmin())
-            return self._action(peg, int(info["pair_peg_end"][0, peg, socket]), socket, RELAXED_HEIGHT, GRIPPER_OPEN)
-        socket = int(env.target_sockets(info)[0, peg])
-        pair = {key: float(info[f"pair_{key}"][0, peg, socket]) for key in ("inserted_fraction", "lateral_offset", "axis_angle")}
+        peg = int(held.int().argmax())  # the first held
+        socket = int(env.target_sockets(info)[0, peg])  # for an inserted peg, the socket it stands in
         end = int(info["pair_peg_end"][0, peg, socket])
+        if bool(info["peg_inserted"][0, peg]):  # let go where it stands
+            return self._action(peg, end, socket, RELAXED_HEIGHT, GRIPPER_OPEN)
+        pair = {key: float(info[f"pair_{key}"][0, peg, socket]) for key in ("inserted_fraction", "lateral_offset", "axis_angle")}
         depth = float(env.insertion.hole_depth[0, socket])
         tip_height = (1.0 - pair["inserted_fraction"]) * depth
         if pair["lateral_offset"] > REGION_RADIUS or tip_height > depth + REGION_HEIGHT:
