@@ -35,8 +35,10 @@ from mani_skill_space.learning import (
     load_demonstrations,
     load_labelled_states,
     load_model,
+    observed_dims,
     save_checkpoint,
     set_learning_rate,
+    state_layout,
     task_of_demonstrations,
 )
 
@@ -56,6 +58,10 @@ class Args:
     together with the demonstrations (same env, obs and control mode)."""
     labelled_share: Optional[float] = None
     """Share of every batch drawn from ``--labelled-states`` (None: uniformly from all transitions)."""
+    observe: tuple[str, ...] = ()
+    """Learn from these entries of the state observation only (names as ``agent/qpos``, ``extra/tcp_pos``; every
+    entry by default), e.g. Solar Panel Assembly's next peg's slots without the four pegs' own. The checkpoint keeps
+    the columns, so the evaluation CLI feeds the policy the same."""
     init_checkpoint: Optional[Path] = None
     """Start from this BC checkpoint (its network and observation normalisation) instead of from scratch, e.g. the
     policy whose rollouts were labelled."""
@@ -98,9 +104,13 @@ def main(args: Args) -> Path:
     obs, actions = torch.cat([obs, labelled_obs]), torch.cat([actions, labelled_actions])
     run_dir = args.output_dir / (args.name or f"bc-{env_id}-{int(time.time())}")
     if args.init_checkpoint is not None:
+        if args.observe:
+            raise ValueError("--observe takes no effect with --init-checkpoint (the checkpoint's network decides what it observes); drop one")
         model, model_kwargs = initial_model(args.init_checkpoint, env_id, obs.shape[1])
     else:
         model_kwargs = dict(state_dim=obs.shape[1], action_dim=actions.shape[1], hidden=args.hidden)
+        if args.observe:
+            model_kwargs["observed"] = observed_dims(observation_layout(env_id, env_kwargs, obs_mode, control_mode, obs.shape[1]), args.observe)
         model = BehaviourCloningPolicy(**model_kwargs)
         model.obs_mean.copy_(obs.mean(0))
         model.obs_std.copy_(obs.std(0).clamp_min(1e-3))
@@ -147,6 +157,26 @@ def evaluate(policy, env_id: str, env_kwargs: dict, seeds) -> dict[str, float]:
     from mani_skill_space.rollout import evaluate_policy  # the simulator only where training evaluates
 
     return evaluate_policy(policy, env_id, env_kwargs, seeds)
+
+
+def observation_layout(env_id: str, env_kwargs: dict, obs_mode: str, control_mode: str, state_dim: int) -> dict[str, slice]:
+    """The demonstrations' state vector's layout (``state_layout``), read off the env they were recorded in."""
+    import gymnasium as gym
+
+    import mani_skill_space  # noqa: F401  (registers the envs)
+
+    if obs_mode != "state":
+        raise ValueError(f"--observe selects state observation entries; the demonstrations are in obs mode {obs_mode!r}")
+    env = gym.make(env_id, obs_mode="state_dict", control_mode=control_mode, **env_kwargs)
+    try:
+        obs, _ = env.reset(seed=0)
+        layout = state_layout(obs)
+    finally:
+        env.close()
+    width = max(s.stop for s in layout.values())
+    if width != state_dim:
+        raise ValueError(f"{env_id} gives {width} state observations and the demonstrations {state_dim}: they were recorded with another version of its observations")
+    return layout
 
 
 def load_labelled(args: Args, task: tuple, state_dim: int, action_dim: int) -> tuple[torch.Tensor, torch.Tensor]:

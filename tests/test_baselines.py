@@ -112,6 +112,31 @@ def test_behaviour_cloning(demos, tmp_path):
     _score(checkpoint, tmp_path)
 
 
+def test_behaviour_cloning_observes_only_the_entries_it_is_given(demos, tmp_path):
+    import gymnasium as gym
+
+    from mani_skill_space.learning import state_layout
+
+    env = gym.make("SampleCollection-v1", obs_mode="state_dict", control_mode="pd_ee_delta_pose", render_backend="none", **ENV_KWARGS)
+    flat_env = gym.make("SampleCollection-v1", obs_mode="state", control_mode="pd_ee_delta_pose", render_backend="none", **ENV_KWARGS)
+    entries, flat = env.reset(seed=0)[0], flat_env.reset(seed=0)[0]
+    env.close(), flat_env.close()
+    layout = state_layout(entries)
+    assert max(columns.stop for columns in layout.values()) == flat.shape[1]
+    for name, columns in layout.items():  # each entry is where the layout says it is in the flat state
+        group, key = name.split("/")
+        torch.testing.assert_close(flat[:, columns], entries[group][key].reshape(1, -1).float())
+    bc = _baseline("bc")
+    checkpoint = bc.main(bc.Args(demos=demos, observe=("extra/tcp_pos", "agent/qpos"), max_iterations=20, eval_every=20, eval_episodes=0, output_dir=tmp_path, name="bc"))
+    policy = CheckpointPolicy(str(checkpoint))
+    wanted = [*range(layout["agent/qpos"].start, layout["agent/qpos"].stop), *range(layout["extra/tcp_pos"].start, layout["extra/tcp_pos"].stop)]
+    assert policy.checkpoint["model_kwargs"]["observed"] == wanted
+    assert policy.model.net[0].in_features == len(wanted) == 12
+    _score(checkpoint, tmp_path)
+    with pytest.raises(ValueError, match="Unknown state observation entry 'extra/tcp_position'; valid choices: agent/qpos, agent/qvel, extra/tcp_pos"):
+        bc.main(bc.Args(demos=demos, observe=("extra/tcp_position",), max_iterations=1, eval_episodes=0, output_dir=tmp_path, name="bad"))
+
+
 @pytest.mark.parametrize("learner", ["bc", "diffusion_policy"])
 def test_imitation_learns_from_unsuccessful_demonstrations_only_when_asked(learner, demos, tmp_path, monkeypatch):
     out_of_time = tmp_path / "out_of_time.h5"

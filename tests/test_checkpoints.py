@@ -81,3 +81,34 @@ def test_observations_of_another_size_are_refused_by_name(tmp_path):
     assert policy.act(torch.zeros(1, 5)).shape == (1, 2)
     with pytest.raises(CheckpointError, match="stale.pt takes 5 state observations and this version of SampleCollection-v1 gives 6"):
         policy.act(torch.zeros(1, 6))
+
+
+def test_a_policy_of_some_columns_ignores_the_others_and_loads_with_them(tmp_path):
+    kwargs = dict(state_dim=6, action_dim=2, hidden=8, depth=1, observed=[1, 4])
+    model = BehaviourCloningPolicy(**kwargs)
+    assert model.net[0].in_features == 2
+    states = torch.randn(8, 6)
+    others_changed = states.clone()
+    others_changed[:, [0, 2, 3, 5]] = torch.randn(8, 4)
+    torch.testing.assert_close(model(states), model(others_changed))
+    observed_changed = states.clone()
+    observed_changed[:, 4] += 1.0
+    assert not torch.allclose(model(states), model(observed_changed))
+    policy = CheckpointPolicy(str(save_checkpoint(tmp_path / "some.pt", "bc", model, kwargs, "SampleCollection-v1", {}, "state", "pd_ee_delta_pose")))
+    torch.testing.assert_close(policy.act(states), model(states))
+
+
+def test_observed_columns_outside_the_state_are_refused():
+    with pytest.raises(ValueError, match=r"observed columns must lie in \[0, 6\)"):
+        BehaviourCloningPolicy(state_dim=6, action_dim=2, observed=[2, 6])
+
+
+def test_the_state_layout_follows_maniskills_flattening_order():
+    from mani_skill_space.learning import observed_dims, state_layout
+
+    obs = {"agent": {"qpos": torch.zeros(8, 3), "qvel": torch.zeros(8, 3)}, "extra": {"gripper": torch.zeros(8), "goal": torch.zeros(8, 2)}}
+    layout = state_layout(obs)
+    assert layout == {"agent/qpos": slice(0, 3), "agent/qvel": slice(3, 6), "extra/gripper": slice(6, 7), "extra/goal": slice(7, 9)}
+    assert observed_dims(layout, ["extra/goal", "agent/qpos"]) == [0, 1, 2, 7, 8]
+    with pytest.raises(ValueError, match="Unknown state observation entry 'extra/gaol'; valid choices: agent/qpos, agent/qvel, extra/gripper, extra/goal"):
+        observed_dims(layout, ["extra/gaol"])

@@ -1,6 +1,7 @@
 """What the learning baselines (``baselines/``) share with the evaluation CLI.
 
-- ``observations``: observation encoding for the networks (state, or state plus RGB-D);
+- ``observations``: observation encoding for the networks (state, or state plus RGB-D) and the state vector's
+  layout (which columns each entry fills);
 - ``networks``: PPO's actor-critic, SAC's actor, the BC MLP and the diffusion policy's denoiser;
 - ``checkpoints``: saving, safe loading (tensors and plain data only) and ``CheckpointPolicy``, which the
   evaluation CLI runs for ``--policy checkpoint:PATH``; ``BestCheckpoint`` keeps the best one seen in training;
@@ -28,7 +29,7 @@ from mani_skill_space.learning.networks import (
     denoise,
     mlp,
 )
-from mani_skill_space.learning.observations import IMAGE_OBS_MODES, STATE_OBS_MODES, encode_observation
+from mani_skill_space.learning.observations import IMAGE_OBS_MODES, STATE_OBS_MODES, encode_observation, observed_dims, state_layout
 from mani_skill_space.learning.schedules import LR_SCHEDULES, LrSchedule, set_learning_rate
 from mani_skill_space.learning.vector_env import VectorEnv
 
@@ -58,7 +59,9 @@ __all__ = [
     "load_labelled_states",
     "load_model",
     "mlp",
+    "observed_dims",
     "save_checkpoint",
     "set_learning_rate",
+    "state_layout",
     "task_of_demonstrations",
 ]

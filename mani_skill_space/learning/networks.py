@@ -107,16 +107,23 @@ tails, and an unseen spike would otherwise swamp the network's input."""
 
 
 class BehaviourCloningPolicy(nn.Module):
-    """An MLP from (normalised, clipped) state to action."""
+    """An MLP from (normalised, clipped) state to action; with ``observed`` (column indices of the state vector),
+    from those columns only, so that a policy can be kept from features that would distract it."""
 
-    def __init__(self, state_dim: int, action_dim: int, hidden: int = 512, depth: int = 3):
+    def __init__(self, state_dim: int, action_dim: int, hidden: int = 512, depth: int = 3, observed: Optional[Sequence[int]] = None):
         super().__init__()
-        self.net = mlp([state_dim, *([hidden] * depth), action_dim])
+        if observed is not None and not all(0 <= i < state_dim for i in observed):
+            raise ValueError(f"observed columns must lie in [0, {state_dim}): got {list(observed)}")
+        self.net = mlp([state_dim if observed is None else len(observed), *([hidden] * depth), action_dim])
         self.register_buffer("obs_mean", torch.zeros(state_dim))
         self.register_buffer("obs_std", torch.ones(state_dim))
+        self.observed = None if observed is None else torch.as_tensor(list(observed), dtype=torch.long)
 
     def forward(self, state: torch.Tensor) -> torch.Tensor:
-        return self.net(_normalized(self, state))
+        normalized = _normalized(self, state)
+        if self.observed is not None:
+            normalized = normalized[..., self.observed.to(normalized.device)]
+        return self.net(normalized)
 
     def act(self, obs) -> torch.Tensor:
         return self(obs["state"])

@@ -30,3 +30,33 @@ def encode_observation(obs: Any, obs_mode: str, device: torch.device) -> dict[st
         "depth": torch.cat([c["depth"] for c in cameras], dim=-1),
     }
 
+
+
+# ---------------------------------------------------------------------- the state vector's layout
+def state_layout(obs_dict: dict, prefix: str = "") -> dict[str, slice]:
+    """Where each entry of a state observation lies in the flat vector of ManiSkill's ``state`` obs mode, from the
+    same observation as a ``state_dict`` (batched tensors): ``{"agent/qpos": slice(0, 9), ..., "extra/tcp_pos": ...}``,
+    in the order ``mani_skill.utils.common.flatten_state_dict`` concatenates them (insertion order, depth first; an
+    (n,) tensor is one column)."""
+    layout: dict[str, slice] = {}
+    start = 0
+    for key, value in obs_dict.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            inner = state_layout(value, f"{name}/")
+            layout.update({k: slice(s.start + start, s.stop + start) for k, s in inner.items()})
+            start += sum(s.stop - s.start for s in inner.values())
+            continue
+        width = 1 if value.ndim == 1 else int(value.shape[1])
+        layout[name] = slice(start, start + width)
+        start += width
+    return layout
+
+
+def observed_dims(layout: dict[str, slice], keys) -> list[int]:
+    """The state vector's columns of the entries ``keys`` (names in ``layout``, e.g. ``extra/tcp_pos``), in the
+    vector's order; an unknown name raises ``ValueError`` naming the valid ones."""
+    unknown = [key for key in keys if key not in layout]
+    if unknown:
+        raise ValueError(f"Unknown state observation entr{'y' if len(unknown) == 1 else 'ies'} {', '.join(map(repr, unknown))}; valid choices: {', '.join(layout)}")
+    return sorted(i for key in set(keys) for i in range(layout[key].start, layout[key].stop))
