@@ -105,7 +105,7 @@ def main(args: Args) -> Path:
     run_dir = args.output_dir / (args.name or f"bc-{env_id}-{int(time.time())}")
     if args.init_checkpoint is not None:
         if args.observe:
-            raise ValueError("--observe takes no effect with --init-checkpoint (the checkpoint's network decides what it observes); drop one")
+            raise ValueError("--observe cannot be combined with --init-checkpoint (the checkpoint's network already fixes what it observes); give one of them")
         model, model_kwargs = initial_model(args.init_checkpoint, env_id, obs.shape[1])
     else:
         model_kwargs = dict(state_dim=obs.shape[1], action_dim=actions.shape[1], hidden=args.hidden)
