@@ -120,7 +120,8 @@ def test_behaviour_cloning_observes_only_the_entries_it_is_given(demos, tmp_path
     env = gym.make("SampleCollection-v1", obs_mode="state_dict", control_mode="pd_ee_delta_pose", render_backend="none", **ENV_KWARGS)
     flat_env = gym.make("SampleCollection-v1", obs_mode="state", control_mode="pd_ee_delta_pose", render_backend="none", **ENV_KWARGS)
     entries, flat = env.reset(seed=0)[0], flat_env.reset(seed=0)[0]
-    env.close(), flat_env.close()
+    env.close()
+    flat_env.close()
     layout = state_layout(entries)
     assert max(columns.stop for columns in layout.values()) == flat.shape[1]
     for name, columns in layout.items():  # each entry is where the layout says it is in the flat state

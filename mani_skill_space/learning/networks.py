@@ -117,13 +117,12 @@ class BehaviourCloningPolicy(nn.Module):
         self.net = mlp([state_dim if observed is None else len(observed), *([hidden] * depth), action_dim])
         self.register_buffer("obs_mean", torch.zeros(state_dim))
         self.register_buffer("obs_std", torch.ones(state_dim))
-        self.observed = None if observed is None else torch.as_tensor(list(observed), dtype=torch.long)
+        # not saved with the weights: the checkpoint's model kwargs rebuild it, and it moves with the model
+        self.register_buffer("observed", None if observed is None else torch.as_tensor(list(observed), dtype=torch.long), persistent=False)
 
     def forward(self, state: torch.Tensor) -> torch.Tensor:
         normalized = _normalized(self, state)
-        if self.observed is not None:
-            normalized = normalized[..., self.observed.to(normalized.device)]
-        return self.net(normalized)
+        return self.net(normalized if self.observed is None else normalized[..., self.observed])
 
     def act(self, obs) -> torch.Tensor:
         return self(obs["state"])

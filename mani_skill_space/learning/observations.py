@@ -31,21 +31,19 @@ def encode_observation(obs: Any, obs_mode: str, device: torch.device) -> dict[st
     }
 
 
-
 # ---------------------------------------------------------------------- the state vector's layout
-def state_layout(obs_dict: dict, prefix: str = "") -> dict[str, slice]:
+def state_layout(obs_dict: dict, prefix: str = "", start: int = 0) -> dict[str, slice]:
     """Where each entry of a state observation lies in the flat vector of ManiSkill's ``state`` obs mode, from the
     same observation as a ``state_dict`` (batched tensors): ``{"agent/qpos": slice(0, 9), ..., "extra/tcp_pos": ...}``,
     in the order ``mani_skill.utils.common.flatten_state_dict`` concatenates them (insertion order, depth first; an
-    (n,) tensor is one column)."""
+    (n,) tensor is one column), the first from column ``start``."""
     layout: dict[str, slice] = {}
-    start = 0
     for key, value in obs_dict.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict):
-            inner = state_layout(value, f"{name}/")
-            layout.update({k: slice(s.start + start, s.stop + start) for k, s in inner.items()})
-            start += sum(s.stop - s.start for s in inner.values())
+            inner = state_layout(value, f"{name}/", start)
+            layout.update(inner)
+            start = max((s.stop for s in inner.values()), default=start)
             continue
         width = 1 if value.ndim == 1 else int(value.shape[1])
         layout[name] = slice(start, start + width)
