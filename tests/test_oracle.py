@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
 from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, _finger_box_corners, _trapezoid
-from mani_skill_space.oracles.debris_capture import FAST_SWING
+from mani_skill_space.oracles.debris_capture import FAST_SWING, STUCK_CHASE_STEPS
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
@@ -138,6 +138,22 @@ def test_oracle_chases_debris_that_slipped_out_as_the_hand_braked():
     result, phases, _ = _debris_episode_with_phases(63020, asset_source="procedural", difficulty=0.0)
     assert result.success_at_end, result.failure
     assert "chase" in phases[phases.index("brake"):]
+
+
+def test_oracle_chase_steps_toward_another_solution_when_its_servo_is_stuck():
+    """Tuning seed 63056 (a 200 mm peg; it failed before): the peg strikes the arm short of the waiting hand and drifts
+    off slowly within reach, and the chase's grasp needs the wrist past its limit: the servo held the arm still for the
+    rest of the episode. Now, held ``STUCK_CHASE_STEPS`` in a row, it steps toward the nearest other solution (the same
+    grasp or its half-turned twin) and takes the peg."""
+    env = gym.make("DebrisCapture-v1", domain="orbit", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    oracle = oracle_for("DebrisCapture-v1")
+    held = []
+    act = oracle.act
+    oracle.act = lambda obs: (act(obs), held.append((oracle.phase, oracle.servo_held_steps)))[0]
+    result = run_episode(env, oracle, 63056)
+    env.close()
+    assert result.success_at_end, result.failure
+    assert any(phase == "chase" and steps > STUCK_CHASE_STEPS for phase, steps in held)
 
 
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back

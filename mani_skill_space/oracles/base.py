@@ -160,6 +160,8 @@ class Oracle(Policy):
         self.failure: Optional[str] = None
         self.start_qpos = self.arm_qpos().copy()
         """The arm's joints when the episode started."""
+        self.servo_held_steps = 0
+        """Steps in a row that ``servo`` has held its previous target for want of a solution near the joints."""
         self.phase = "start"
         """What the plan is doing now (the motion under way, e.g. ``"pre-grasp"``, ``"insert"``): the runners report it
         for an episode that ends before the plan does."""
@@ -675,12 +677,17 @@ class Oracle(Policy):
                 return False
         return True
 
-    def servo(self, target: Callable[[int], sapien.Pose], steps: int, what: str, until: Optional[Callable[[int], bool]] = None) -> Iterator[np.ndarray]:
+    def servo(
+        self, target: Callable[[int], sapien.Pose], steps: int, what: str, until: Optional[Callable[[int], bool]] = None, far_solutions_after: Optional[int] = None
+    ) -> Iterator[np.ndarray]:
         """Closed-loop Cartesian servo: at every step, the TCP pose ``target(step)`` (recomputed from the scene as
         it is now), solved by IK from the current joints and sent as the joint target. Where a step's pose has no
         solution (e.g. pressing past a stop), or whose solution is on another branch of the arm's inverse kinematics
-        (a joint more than ``SERVO_JOINT_STEP`` away), the previous target is held. It runs ``steps`` steps, or, given
-        ``until``, ends before the first step for which ``until(step)`` holds (checked on the scene as it is then)."""
+        (a joint more than ``SERVO_JOINT_STEP`` away), the previous target is held; given ``far_solutions_after``, once
+        it has been held that many steps in a row (across calls), the arm steps toward the nearest other solution
+        instead (``_step_to_far_solution``). It runs
+        ``steps`` steps, or, given ``until``, ends before the first step for which ``until(step)`` holds (checked on
+        the scene as it is then)."""
         self.phase = what
         planner = self.solver.planner
         command = self.hold_action()
@@ -689,12 +696,29 @@ class Oracle(Policy):
                 return
             self._plan_from_the_base_now()
             self._plan_with_the_fingers_now()
-            goal = self.solver.base_pose.inv() * target(step)
+            pose = target(step)
+            goal = self.solver.base_pose.inv() * pose
             now = self.arm_qpos()
             status, solutions = planner.IK(np.concatenate([goal.p, goal.q]), planner.pad_qpos(now), n_init_qpos=1)
             if status == "Success" and np.abs(solutions[0][: len(now)] - now).max() <= SERVO_JOINT_STEP:
                 command = np.hstack([solutions[0][: len(now)], self.gripper]).astype(np.float32)
+                self.servo_held_steps = 0
+            else:
+                self.servo_held_steps += 1
+                toward = self._step_to_far_solution(pose, now) if far_solutions_after is not None and self.servo_held_steps > far_solutions_after else None
+                if toward is not None:
+                    command = np.hstack([toward, self.gripper]).astype(np.float32)
             yield command
+
+    def _step_to_far_solution(self, pose: sapien.Pose, now: np.ndarray) -> Optional[np.ndarray]:
+        """Where the servo finds no solution of ``pose`` near the joints ``now`` (the wrist at its limit, or the
+        nearest solution on another branch): a step toward the nearest collision-free solution of ``pose`` or of the
+        same grasp half a turn about the approach axis (``wrist_turned``: the fingers are alike), every joint at most
+        ``SERVO_JOINT_STEP``, where the joints' straight way there is free; None where there is none."""
+        for solution in sorted((q for grasp in (pose, wrist_turned(pose)) for q in self.ik_solutions(grasp, near=now)), key=lambda q: float(np.abs(q - now).max())):
+            if self.path_is_free(now, solution):
+                return now + np.clip(solution - now, -SERVO_JOINT_STEP, SERVO_JOINT_STEP)
+        return None
 
     def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
         """Hold still until the task has reported success for ``stable_steps`` steps in a row (e.g. a released

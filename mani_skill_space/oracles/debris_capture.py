@@ -42,6 +42,11 @@ RESERVED_STEPS = 30
 CHASE_CATCH_SPEED = 0.15
 """How fast (m/s) the chase closes in on the debris: a debris that got away moves off rather than into the hand, so the
 chase must close faster than the follow (``CATCH_SPEED``) to reach it before it leaves the arm's reach."""
+STUCK_CHASE_STEPS = 5
+"""Control steps in a row the chase holds the arm still for want of an IK solution near its joints (the wrist at its
+limit, or the nearest solution on another branch) before it steps toward a farther one: in every orbital failure
+traced on the dataset's tuning seeds the chase stood still like this for 70-120 steps, in some while the debris drifted
+off slowly within reach."""
 CLOSED_FOLLOW_STEPS = 6
 CATCH_SPEED = 0.08
 """How fast (m/s) the debris may close in on the hand while the hand moves with it."""
@@ -113,14 +118,16 @@ class DebrisCaptureOracle(Oracle):
         return self.gripper == GRIPPER_CLOSED and bool(env.is_grasping(env.debris)[0])
 
     def _until_held(self, target: Callable[[int], sapien.Pose], what: str, going: Callable[[int], bool]) -> Iterator[np.ndarray]:
-        """Servo to ``target`` while ``going(step)`` holds, until the fingers have been closed ``CLOSED_FOLLOW_STEPS``."""
+        """Servo to ``target`` while ``going(step)`` holds, until the fingers have been closed ``CLOSED_FOLLOW_STEPS``.
+        A chase whose servo has found no solution near the joints for ``STUCK_CHASE_STEPS`` in a row steps toward the
+        nearest other one (``Oracle.servo``'s ``far_solutions_after``)."""
         closed_steps, step = 0, 0
         while going(step):
             if self.gripper == GRIPPER_CLOSED:
                 closed_steps += 1
                 if closed_steps > CLOSED_FOLLOW_STEPS:
                     return
-            yield from self.servo(target, 1, what)
+            yield from self.servo(target, 1, what, far_solutions_after=STUCK_CHASE_STEPS if what == "chase" else None)
             step += 1
 
     def _on_debris(self, env, meeting: sapien.Pose, lead: Optional[float] = None, catch_speed: float = CATCH_SPEED) -> sapien.Pose:
