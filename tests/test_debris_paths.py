@@ -8,14 +8,16 @@ from mani_skill_space.debris_paths import (
     HAND_READY_TIME,
     LATEST_MEETING,
     MIN_SECONDS_WITHIN_REACH,
+    POST_CLEARANCE,
     REACH,
     SHOULDER_HEIGHT,
     TIME_STEP,
     first_catchable,
+    seconds_to_camera_post,
     seconds_within_reach,
     tumbling_rotations,
 )
-from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT
+from mani_skill_space.procgen.mounts import ARM_MOUNT_HEIGHT, BASE_CAMERA_POST_TOP, BASE_CAMERA_POST_XY
 
 SHOULDER = torch.tensor([0.0, 0.0, ARM_MOUNT_HEIGHT + SHOULDER_HEIGHT])
 ZERO_G = torch.zeros(3)
@@ -41,6 +43,28 @@ def test_out_of_reach_below_the_meeting_height_or_falling_through_the_ground_nev
     falling = seconds_within_reach(torch.tensor([0.6, 0.0, 0.5]), torch.zeros(3), torch.tensor([0.0, 0.0, -9.81]), SHOULDER)
     assert float(far) == float(low) == 0.0
     assert float(falling) == 0.0  # it is on the ground before the hand is ready
+
+
+def test_time_after_the_path_strikes_the_base_camera_post_does_not_count():
+    # along x at 0.3 m/s, 5 cm above the arm's base (below the camera's head), straight through the post: within reach
+    # in front of the arm for about 1.55 s (x 0.75 -> 0.28), then, had it flown through the post and the arm, behind it
+    position, velocity = torch.tensor([1.2, 0.0, ARM_MOUNT_HEIGHT + 0.05]), torch.tensor([-0.3, 0.0, 0.0])
+    through = seconds_within_reach(position, velocity, ZERO_G, SHOULDER, camera_post=False)
+    struck = seconds_within_reach(position, velocity, ZERO_G, SHOULDER)
+    assert abs(float(through) - 3.1) <= 3 * TIME_STEP
+    assert abs(float(struck) - 1.55) <= 2 * TIME_STEP
+    base = SHOULDER - torch.tensor([0.0, 0.0, SHOULDER_HEIGHT])
+    assert abs(float(seconds_to_camera_post(position, velocity, ZERO_G, base)) - (1.2 - BASE_CAMERA_POST_XY[0] - POST_CLEARANCE) / 0.3) <= TIME_STEP
+
+
+def test_a_path_beside_or_above_the_camera_post_is_not_cut_short():
+    base = SHOULDER - torch.tensor([0.0, 0.0, SHOULDER_HEIGHT])
+    beside = torch.tensor([1.2, BASE_CAMERA_POST_XY[1] + POST_CLEARANCE + 0.02, ARM_MOUNT_HEIGHT + 0.05])
+    above = torch.tensor([1.2, 0.0, ARM_MOUNT_HEIGHT + BASE_CAMERA_POST_TOP + POST_CLEARANCE + 0.02])
+    velocity = torch.tensor([-0.3, 0.0, 0.0])
+    for position in (beside, above):
+        assert torch.isinf(seconds_to_camera_post(position, velocity, ZERO_G, base))
+        assert torch.equal(seconds_within_reach(position, velocity, ZERO_G, SHOULDER), seconds_within_reach(position, velocity, ZERO_G, SHOULDER, camera_post=False))
 
 
 def test_batched_over_envs_and_candidates():

@@ -146,7 +146,7 @@ class DebrisCaptureEnv(SpaceManipulationEnv):
             rng = self._batched_episode_rng[env_idx]
             self._initialize_agent(env_idx)
             position, quaternion, velocity, spin = self._candidate_starts(rng, b)
-            seconds = seconds_within_reach(position, velocity, self._gravity(), self._shoulder(env_idx)[:, None])
+            seconds = seconds_within_reach(position, velocity, self._gravity(), self._shoulder(env_idx)[:, None], camera_post=not self.free_flyer)
             pick = first_catchable(seconds)
             choose = lambda x: x[torch.arange(b), pick]  # noqa: E731
             position, quaternion, velocity, spin = choose(position), choose(quaternion), choose(velocity), choose(spin)

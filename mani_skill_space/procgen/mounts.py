@@ -31,6 +31,10 @@ BIN_INNER_HEIGHT = 0.12
 BIN_WALL = 0.012
 
 BASE_CAMERA_EYE = (0.24, 0.0, 0.34)
+BASE_CAMERA_POST_XY = (BASE_CAMERA_EYE[0] - 0.03, 0.0)
+"""Where the base camera's post stands, horizontally from the arm's base (which is at the mount's origin)."""
+BASE_CAMERA_POST_TOP = BASE_CAMERA_EYE[2] + 0.02 - ARM_MOUNT_HEIGHT
+"""Height of the top of the base camera's head above the arm's base."""
 BASE_CAMERA_TARGET = (0.62, 0.0, 0.0)
 
 WHITE = (0.86, 0.86, 0.83, 1.0)
@@ -132,7 +136,7 @@ def _pedestal_and_camera(surface_height: float, sections: int) -> list[tuple]:
     pedestal_height = ARM_MOUNT_HEIGHT - surface_height - PEDESTAL_GAP
     pedestal = cylinder_mesh(PEDESTAL_RADIUS, pedestal_height, sections, (0.0, 0.0, surface_height + pedestal_height / 2))
     post_height = BASE_CAMERA_EYE[2] - surface_height - 0.02
-    post = box_mesh((0.015, 0.015, post_height / 2), (BASE_CAMERA_EYE[0] - 0.03, 0.0, surface_height + post_height / 2))
+    post = box_mesh((0.015, 0.015, post_height / 2), (BASE_CAMERA_POST_XY[0], BASE_CAMERA_POST_XY[1], surface_height + post_height / 2))
     head = box_mesh((0.02, 0.04, 0.02), (BASE_CAMERA_EYE[0] - 0.02, 0.0, BASE_CAMERA_EYE[2]))
     return [(pedestal, ALUMINIUM, 0.4, 0.6), (post, DARK, 0.6, 0.2), (head, DARK, 0.3, 0.2)]
 
