@@ -2,8 +2,8 @@
 
 Debris Capture draws each episode's start (position, drift, tumble) and keeps only a path that a Panda can meet:
 the debris must stay within the arm's reach, above the surface the arm stands on, long enough after the arm has
-had time to bring its open hand there and before it strikes the base camera's post (``seconds_within_reach``). The oracle searches the same shell for its
-meeting point (``oracles.debris_capture``).
+had time to bring its open hand there and before it strikes the base camera's post (``seconds_within_reach``). The
+oracle searches the same shell for its meeting point (``oracles.debris_capture``).
 """
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ chase must close faster than the follow (``CATCH_SPEED``) to reach it before it 
 STUCK_CHASE_STEPS = 5
 """Control steps in a row the chase holds the arm still for want of an IK solution near its joints (the wrist at its
 limit, or the nearest solution on another branch) before it steps toward a farther one: in every orbital failure
-traced on the dataset's tuning seeds the chase stood still like this for 70-120 steps, in some while the debris drifted
+traced on the dataset's tuning seeds the chase stood still like this for 68-122 steps, in some while the debris drifted
 off slowly within reach."""
 CLOSED_FOLLOW_STEPS = 6
 CATCH_SPEED = 0.08
