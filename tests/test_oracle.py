@@ -92,15 +92,17 @@ def test_oracle_swings_briskly_to_debris_it_cannot_meet_at_the_usual_pace():
 
 
 def _debris_episode_with_phases(seed: int, asset_source: str = "dataset", difficulty: float = 1.0):
-    """An orbital Debris Capture episode of the oracle, with the phase and gripper command of every action."""
+    """An orbital Debris Capture episode of the oracle, with the phase, the gripper command and the servo's held steps
+    in a row (``Oracle.servo_held_steps``) of every action."""
     env = gym.make("DebrisCapture-v1", domain="orbit", asset_source=asset_source, difficulty=difficulty, control_mode="pd_joint_pos", render_backend="none")
     oracle = oracle_for("DebrisCapture-v1")
     steps = []
     act = oracle.act
-    oracle.act = lambda obs: (act(obs), steps.append((oracle.phase, oracle.gripper)))[0]
+    oracle.act = lambda obs: (act(obs), steps.append((oracle.phase, oracle.gripper, oracle.servo_held_steps)))[0]
     result = run_episode(env, oracle, seed)
     env.close()
-    return result, [phase for phase, _ in steps], [gripper for _, gripper in steps]
+    phases, grippers, held_steps = (list(column) for column in zip(*steps))
+    return result, phases, grippers, held_steps
 
 
 @pytest.mark.parametrize("seed", [63100, 63011])  # tuning seeds: both failed before the chase
@@ -108,7 +110,7 @@ def test_oracle_chases_debris_that_bounced_off_the_open_hand(seed):
     """A 200 mm peg strikes the waiting hand and drifts off slower; the hand, moving with it from where its drives
     left it, falls behind and the fingers never close. The chase, its target ahead of the hand by the drives' lag,
     catches up with it and takes it."""
-    result, phases, _ = _debris_episode_with_phases(seed)
+    result, phases, _, _ = _debris_episode_with_phases(seed)
     assert result.success_at_end, (seed, result.failure)
     assert "chase" in phases
 
@@ -117,7 +119,7 @@ def test_oracle_chases_debris_that_bounced_off_the_open_hand(seed):
 def test_oracle_chases_debris_that_struck_the_arm_before_it_arrived(seed):
     """A 200 mm peg strikes the arm short of the waiting hand and drifts off past it; the oracle chases it at once,
     without the follow meant for debris that came to the hand."""
-    result, phases, _ = _debris_episode_with_phases(seed)
+    result, phases, _, _ = _debris_episode_with_phases(seed)
     assert result.success_at_end, (seed, result.failure)
     assert "chase" in phases and "follow" not in phases
 
@@ -127,7 +129,7 @@ def test_oracle_opens_the_fingers_again_when_they_closed_on_nothing():
     them again, chases on and takes it. (The test's first seed, 63016 at difficulty 1, where a tumbling 3U CubeSat
     brushed a finger and was pushed out from between them, draws another start since the camera-post check of
     ``debris_paths``, and no orbital tuning seed 63000-63119 at difficulty 1 shows this any more.)"""
-    result, phases, grippers = _debris_episode_with_phases(63056, difficulty=1.5)
+    result, phases, grippers, _ = _debris_episode_with_phases(63056, difficulty=1.5)
     assert result.success_at_end, result.failure
     closed_then_open = [i for i in range(1, len(grippers)) if grippers[i - 1] == GRIPPER_CLOSED and grippers[i] == GRIPPER_OPEN]
     assert closed_then_open and phases[closed_then_open[0]] == "chase"
@@ -137,7 +139,7 @@ def test_oracle_chases_debris_that_slipped_out_as_the_hand_braked():
     """Tuning seed 63020 at difficulty 0 (a procedural rock; it failed before): the fingers close on a thin edge of the
     drifting rock, which slips out from between them as the hand brakes; the oracle opens them, chases it again and
     takes it."""
-    result, phases, _ = _debris_episode_with_phases(63020, asset_source="procedural", difficulty=0.0)
+    result, phases, _, _ = _debris_episode_with_phases(63020, asset_source="procedural", difficulty=0.0)
     assert result.success_at_end, result.failure
     assert "chase" in phases[phases.index("brake"):]
 
@@ -147,15 +149,9 @@ def test_oracle_chase_steps_toward_another_solution_when_its_servo_is_stuck():
     off slowly within reach, and the chase's grasp needs the wrist past its limit: the servo held the arm still for the
     rest of the episode. Now, held ``STUCK_CHASE_STEPS`` in a row, it steps toward the nearest other solution (the same
     grasp or its half-turned twin) and takes the peg."""
-    env = gym.make("DebrisCapture-v1", domain="orbit", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
-    oracle = oracle_for("DebrisCapture-v1")
-    held = []
-    act = oracle.act
-    oracle.act = lambda obs: (act(obs), held.append((oracle.phase, oracle.servo_held_steps)))[0]
-    result = run_episode(env, oracle, 63056)
-    env.close()
+    result, phases, _, held_steps = _debris_episode_with_phases(63056)
     assert result.success_at_end, result.failure
-    assert any(phase == "chase" and steps > STUCK_CHASE_STEPS for phase, steps in held)
+    assert any(phase == "chase" and held > STUCK_CHASE_STEPS for phase, held in zip(phases, held_steps))
 
 
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back
