@@ -56,6 +56,10 @@ SERVO_JOINT_STEP = 0.3
 Near a joint limit, IK from the present joints can return a solution on another branch (seed 64005 of Solar Panel
 Assembly, orbit: joint 3 from -2.8 to +2.8 rad in one step of the panel's lift), and the arm whipped round to it and
 flung the panel away."""
+FAR_STEP_PACE = (0.02, 0.15)
+"""(metres, radians): the most the hand moves or turns in a servo step toward another IK solution
+(``Oracle._step_to_far_solution``). Every joint at ``SERVO_JOINT_STEP`` swept the hand 95 mm in one step into a 200 mm
+peg 2 cm from it (Debris Capture, asteroid, tuning seed 63029), which flew off at 1.9 m/s."""
 FINGERS_STILL = 1e-4
 """m: a finger that moves less than this in a control step has stopped closing (``wait_for_grasp``)."""
 FINGERS_SHUT = 5e-4
@@ -629,9 +633,9 @@ class Oracle(Policy):
             rotations.append(Rotation.from_quat(np.roll(pose.q, -1)))  # wxyz -> xyzw
         return np.asarray(positions), rotations
 
-    def steps_along(self, positions: np.ndarray, rotations: list[Rotation]) -> float:
-        """About how many control steps a TCP path takes at ``tcp_pace``."""
-        return float(self._paces(positions, rotations).sum())
+    def steps_along(self, positions: np.ndarray, rotations: list[Rotation], pace: Optional[tuple[float, float]] = None) -> float:
+        """About how many control steps a TCP path takes at ``pace`` (``tcp_pace`` by default)."""
+        return float(self._paces(positions, rotations, pace).sum())
 
     def _paces(self, positions: np.ndarray, rotations: list[Rotation], pace: Optional[tuple[float, float]] = None) -> np.ndarray:
         """Each segment of a TCP path in steps at ``pace`` (``tcp_pace`` by default; its move or its turn, whichever
@@ -714,10 +718,13 @@ class Oracle(Policy):
         """Where the servo finds no solution of ``pose`` near the joints ``now`` (the wrist at its limit, or the
         nearest solution on another branch): a step toward the nearest collision-free solution of ``pose`` or of the
         same grasp half a turn about the approach axis (``wrist_turned``: the fingers are alike), every joint at most
-        ``SERVO_JOINT_STEP``, where the joints' straight way there is free; None where there is none."""
+        ``SERVO_JOINT_STEP`` and the hand at most ``FAR_STEP_PACE``, where the joints' straight way there is free;
+        None where there is none."""
         for solution in sorted((q for grasp in (pose, wrist_turned(pose)) for q in self.ik_solutions(grasp, near=now)), key=lambda q: float(np.abs(q - now).max())):
             if self.path_is_free(now, solution):
-                return now + np.clip(solution - now, -SERVO_JOINT_STEP, SERVO_JOINT_STEP)
+                step = np.clip(solution - now, -SERVO_JOINT_STEP, SERVO_JOINT_STEP)
+                paced = np.concatenate([[0.0], np.cumsum(self._paces(*self.tcp_path(now, now + step), pace=FAR_STEP_PACE))])
+                return now + step * np.interp(1.0, paced, np.linspace(0.0, 1.0, len(paced)))
         return None
 
     def wait_for_success(self, most_steps: int, stable_steps: int = 3) -> Iterator[np.ndarray]:
@@ -1052,8 +1059,13 @@ def lowest_point(actor) -> float:
     return float(collision_vertices(actor)[:, 2].min())
 
 
+LOWEST_GRASP_HEIGHT = 0.012
+"""The lowest (m) a grasp from above goes (``top_down_grasp_pose``): the fingertips stay clear of the ground."""
+
+
 def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose:
-    """A vertical grasp of ``actor`` across the shortest horizontal side of its oriented bounding box."""
+    """A vertical grasp of ``actor`` across the shortest horizontal side of its oriented bounding box, no lower than
+    ``LOWEST_GRASP_HEIGHT``."""
     from mani_skill.examples.motionplanning.base_motionplanner.utils import compute_grasp_info_by_obb, get_actor_obb
 
     obb = get_actor_obb(actor)
@@ -1061,4 +1073,5 @@ def top_down_grasp_pose(env, actor, finger_length: float = 0.025) -> sapien.Pose
     target_closing = env.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].cpu().numpy()
     info = compute_grasp_info_by_obb(obb, approaching=approaching, target_closing=target_closing, depth=finger_length)
     centre = np.asarray(obb.primitive.transform)[:3, 3]
-    return env.agent.build_grasp_pose(approaching, info["closing"], centre)
+    grasp = env.agent.build_grasp_pose(approaching, info["closing"], centre)
+    return sapien.Pose([grasp.p[0], grasp.p[1], max(grasp.p[2], LOWEST_GRASP_HEIGHT)], grasp.q)

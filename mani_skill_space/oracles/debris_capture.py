@@ -3,7 +3,8 @@ debris, fingers facing it, by an arm motion that keeps every link out of the deb
 hand; as it comes close, move the hand with it (so the fingers close on an object at
 rest relative to them), close, keep moving with it while braking gently to a stop, and hold still. Debris that gets
 away (bounces off the hand or the arm, slips from fingers that closed on its rim, or slips out of them as the hand
-brakes) is chased, the fingers open."""
+brakes) is chased, the fingers open; where it comes to rest on the ground instead (the asteroid's weak gravity), it is
+taken from above."""
 
 from __future__ import annotations
 
@@ -15,7 +16,19 @@ import torch
 from mplib.pymp.collision_detection import fcl
 
 from mani_skill_space.debris_paths import LATEST_MEETING, LOWEST_MEETING_HEIGHT, REACH, SHOULDER_HEIGHT, tumbling_rotations
-from mani_skill_space.oracles.base import GRIPPER_CLOSED, GRIPPER_OPEN, JOINT_ACCELERATION_LIMIT, Oracle, PlanningFailed, collision_part_vertices, finger_pad_rectangle, pad_overlap
+from mani_skill_space.oracles.base import (
+    GRIPPER_CLOSED,
+    GRIPPER_OPEN,
+    JOINT_ACCELERATION_LIMIT,
+    Oracle,
+    PlanningFailed,
+    collision_part_vertices,
+    finger_pad_rectangle,
+    pad_overlap,
+    raised,
+    top_down_grasp_pose,
+)
+from mani_skill_space.oracles.sample_collection import PRE_GRASP_HEIGHT
 
 EARLIEST_MEETING = 0.8
 TIME_STEP = 0.1
@@ -73,6 +86,11 @@ FAST_SWING = PANDA_LOWEST_JOINT_ACCELERATION / JOINT_ACCELERATION_LIMIT
 Panda's lowest joint acceleration limit instead of the oracles' usual ``base.JOINT_ACCELERATION_LIMIT``."""
 
 
+RESTING_SPEED = 0.03
+"""m/s: debris touching the ground this slowly has come to rest there (the asteroid's weak gravity brings down debris
+that got away below the hand; it lands within reach of the rover's arm)."""
+
+
 DEBRIS_BALL = "debris_ball"
 """The planner's collision object standing for the ball the tumbling debris sweeps (``_clear_of_debris``)."""
 
@@ -104,9 +122,35 @@ class DebrisCaptureOracle(Oracle):
         chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD, catch_speed=CHASE_CATCH_SPEED)  # noqa: E731
         while not self._holding(env) and self._time_left(env):
             self.gripper = GRIPPER_OPEN
-            yield from self._until_held(chase, "chase", lambda step: self._time_left(env))
+            yield from self._until_held(chase, "chase", lambda step: self._time_left(env) and not self._resting_on_the_ground(env))
+            if self._resting_on_the_ground(env) and self._time_left(env):
+                yield from self._pick_up_from_the_ground(env)
         if self.gripper != GRIPPER_CLOSED:
             raise PlanningFailed("the debris got away from the chasing hand")
+
+    @staticmethod
+    def _resting_on_the_ground(env) -> bool:
+        """Whether the debris has come to rest on the ground (slower than ``RESTING_SPEED``, touching it)."""
+        if getattr(env, "ground", None) is None:
+            return False
+        touching = torch.linalg.norm(env.scene.get_pairwise_contact_forces(env.debris, env.ground)[0]) > 0
+        return bool(touching) and float(torch.linalg.norm(env.debris.linear_velocity[0])) < RESTING_SPEED
+
+    def _pick_up_from_the_ground(self, env) -> Iterator[np.ndarray]:
+        """Grasp debris resting on the ground from above (as Sample Collection's oracle takes a rock): swing to a
+        pre-grasp pose over it, go down, close the fingers."""
+        grasp = top_down_grasp_pose(env, env.debris)
+        pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
+        start = self.arm_qpos()
+        floor = min(self._tcp_position()[2], pre_grasp.p[2])
+        for goal in self.ik_solutions(pre_grasp, near=start):
+            if self.tcp_path(start, goal)[0][:, 2].min() >= floor and self.path_is_free(start, goal):
+                break
+        else:
+            raise PlanningFailed("the debris came to rest on the ground where the hand cannot reach over it")
+        yield from self.joint_move(goal, "over the debris on the ground")
+        yield from self.screw_to(grasp, "down to the debris on the ground", settle_steps=3)
+        yield from self.set_gripper(GRIPPER_CLOSED)
 
     @staticmethod
     def _time_left(env) -> bool:

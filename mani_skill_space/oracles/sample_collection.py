@@ -50,7 +50,6 @@ class SampleCollectionOracle(Oracle):
         (``_bin_approach``);
         ``swing_to_grasp``: reach the pre-grasp pose by a joint-space swing (from over the bin), not a screw."""
         grasp = top_down_grasp_pose(env, sample)
-        grasp = sapien.Pose([grasp.p[0], grasp.p[1], max(grasp.p[2], 0.012)], grasp.q)
         pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
         if swing_to_grasp:
             goal = self.free_joint_goal(self.arm_qpos(), pre_grasp)
