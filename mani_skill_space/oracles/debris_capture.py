@@ -3,8 +3,8 @@ debris, fingers facing it, by an arm motion that keeps every link out of the deb
 hand; as it comes close, move the hand with it (so the fingers close on an object at
 rest relative to them), close, keep moving with it while braking gently to a stop, and hold still. Debris that gets
 away (bounces off the hand or the arm, slips from fingers that closed on its rim, or slips out of them as the hand
-brakes) is chased, the fingers open; where it comes to rest on the ground instead (the asteroid's weak gravity), it is
-taken from above."""
+brakes) is chased, the fingers open; where it comes to rest on the ground or on the mount's deck instead, it is taken
+from above."""
 
 from __future__ import annotations
 
@@ -87,8 +87,9 @@ Panda's lowest joint acceleration limit instead of the oracles' usual ``base.JOI
 
 
 RESTING_SPEED = 0.03
-"""m/s: debris touching the ground this slowly has come to rest there (the asteroid's weak gravity brings down debris
-that got away below the hand; it lands within reach of the rover's arm)."""
+"""m/s: debris touching the ground or the mount this slowly has come to rest there (the asteroid's weak gravity brings
+down debris that got away below the hand, often within reach of the rover's arm; in orbit, debris struck down onto the
+station's deck may stay there)."""
 
 
 DEBRIS_BALL = "debris_ball"
@@ -130,15 +131,15 @@ class DebrisCaptureOracle(Oracle):
 
     @staticmethod
     def _resting_on_the_ground(env) -> bool:
-        """Whether the debris has come to rest on the ground (slower than ``RESTING_SPEED``, touching it)."""
-        if getattr(env, "ground", None) is None:
-            return False
-        touching = torch.linalg.norm(env.scene.get_pairwise_contact_forces(env.debris, env.ground)[0]) > 0
-        return bool(touching) and float(torch.linalg.norm(env.debris.linear_velocity[0])) < RESTING_SPEED
+        """Whether the debris has come to rest on the ground or on the mount (the station's deck, the rover): slower
+        than ``RESTING_SPEED``, touching it."""
+        surfaces = [surface for surface in (getattr(env, "ground", None), env.mount_actor) if surface is not None]
+        touching = any(bool(torch.linalg.norm(env.scene.get_pairwise_contact_forces(env.debris, surface)[0]) > 0) for surface in surfaces)
+        return touching and float(torch.linalg.norm(env.debris.linear_velocity[0])) < RESTING_SPEED
 
     def _pick_up_from_the_ground(self, env) -> Iterator[np.ndarray]:
-        """Grasp debris resting on the ground from above (as Sample Collection's oracle takes a rock): swing to a
-        pre-grasp pose over it, go down, close the fingers."""
+        """Grasp debris resting on the ground (or the mount's deck) from above (as Sample Collection's oracle takes a
+        rock): swing to a pre-grasp pose over it, go down, close the fingers."""
         grasp = top_down_grasp_pose(env, env.debris)
         pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
         start = self.arm_qpos()
