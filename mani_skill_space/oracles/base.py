@@ -438,11 +438,11 @@ class Oracle(Policy):
             arm = path[-1]
         return np.concatenate(paths) if paths else None
 
-    def free_joint_goal(self, start: np.ndarray, pose: sapien.Pose) -> Optional[np.ndarray]:
+    def free_joint_goal(self, start: np.ndarray, pose: sapien.Pose, floor: Optional[float] = None) -> Optional[np.ndarray]:
         """The IK solution for ``pose`` nearest ``start`` that a straight joint move from ``start`` reaches
-        without collision, if any."""
+        without collision (and, given ``floor``, with the TCP never below that height), if any."""
         for goal in self.ik_solutions(pose, near=start):
-            if self.path_is_free(start, goal):
+            if (floor is None or self.tcp_path(start, goal)[0][:, 2].min() >= floor) and self.path_is_free(start, goal):
                 return goal
         return None
 

@@ -123,14 +123,14 @@ class DebrisCaptureOracle(Oracle):
         chase = lambda step: self._on_debris(env, meeting, lead=CHASE_LEAD, catch_speed=CHASE_CATCH_SPEED)  # noqa: E731
         while not self._holding(env) and self._time_left(env):
             self.gripper = GRIPPER_OPEN
-            yield from self._until_held(chase, "chase", lambda step: self._time_left(env) and not self._resting_on_the_ground(env))
-            if self._resting_on_the_ground(env) and self._time_left(env):
+            yield from self._until_held(chase, "chase", lambda step: self._time_left(env) and not self._at_rest_on_ground_or_deck(env))
+            if self._at_rest_on_ground_or_deck(env) and self._time_left(env):
                 yield from self._pick_up_from_the_ground(env)
         if self.gripper != GRIPPER_CLOSED:
             raise PlanningFailed("the debris got away from the chasing hand")
 
     @staticmethod
-    def _resting_on_the_ground(env) -> bool:
+    def _at_rest_on_ground_or_deck(env) -> bool:
         """Whether the debris has come to rest on the ground or on the mount (the station's deck, the rover): slower
         than ``RESTING_SPEED``, touching it."""
         surfaces = [surface for surface in (getattr(env, "ground", None), env.mount_actor) if surface is not None]
@@ -142,12 +142,8 @@ class DebrisCaptureOracle(Oracle):
         rock): swing to a pre-grasp pose over it, go down, close the fingers."""
         grasp = top_down_grasp_pose(env, env.debris)
         pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
-        start = self.arm_qpos()
-        floor = min(self._tcp_position()[2], pre_grasp.p[2])
-        for goal in self.ik_solutions(pre_grasp, near=start):
-            if self.tcp_path(start, goal)[0][:, 2].min() >= floor and self.path_is_free(start, goal):
-                break
-        else:
+        goal = self.free_joint_goal(self.arm_qpos(), pre_grasp, floor=min(self._tcp_position()[2], pre_grasp.p[2]))
+        if goal is None:
             raise PlanningFailed("the debris came to rest on the ground where the hand cannot reach over it")
         yield from self.joint_move(goal, "over the debris on the ground")
         yield from self.screw_to(grasp, "down to the debris on the ground", settle_steps=3)
