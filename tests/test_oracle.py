@@ -1722,6 +1722,51 @@ def test_a_peg_seated_for_the_look_ahead_sits_in_its_hole_at_every_twist():
     env.close()
 
 
+def test_the_multi_peg_oracle_presses_home_a_peg_its_pushes_left_short():
+    """Orbit tuning seed 62057: every push of the second peg stopped 74-90% of the way in, the hand on the top of the
+    modules as the planner sees them, and the peg was let go short of the task's 90%. It is now pressed home with the
+    closed fingertips on its top (``MultiPegInHoleOracle._press_home``), and all four go in (without it the episode
+    ends "peg 1 did not stay in its hole")."""
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    phases = []
+    act = oracle.act
+
+    def act_and_note_the_phase(obs):
+        action = act(obs)
+        phases.append(oracle.phase)
+        return action
+
+    oracle.act = act_and_note_the_phase
+    result = run_episode(env, oracle, 62057)
+    env.close()
+    assert "press home" in phases
+    assert result.success_once and result.success_at_end, result.failure
+
+
+def test_the_pressing_hand_points_down_the_holes_axis():
+    """``_pressing_poses``: every pose is at the point, its approach (TCP z) into the hole, its closing axis (y) square
+    to it, in ``PRESS_HOME_TURNS`` closing directions, each with its half-turned twin."""
+    from mani_skill_space.oracles.peg_in_hole import PRESS_HOME_TURNS, MultiPegInHoleOracle
+
+    oracle = MultiPegInHoleOracle.__new__(MultiPegInHoleOracle)
+    oracle.closings_nearest_first = lambda pose: (pose, pose * sapien.Pose(q=[0.0, 0.0, 0.0, 1.0]))
+    axis = np.array([0.2, -0.1, 0.95])
+    axis /= np.linalg.norm(axis)
+    point = np.array([0.6, -0.1, 0.2])
+    poses = oracle._pressing_poses(point, axis)
+    assert len(poses) == 2 * PRESS_HOME_TURNS
+    closings = []
+    for pose in poses:
+        frame = pose.to_transformation_matrix()
+        np.testing.assert_allclose(frame[:3, 3], point, atol=1e-6)
+        np.testing.assert_allclose(frame[:3, 2], -axis, atol=1e-6)
+        assert abs(frame[:3, 1] @ axis) < 1e-6
+        np.testing.assert_allclose(frame[:3, :3] @ frame[:3, :3].T, np.eye(3), atol=1e-6)
+        closings.append(frame[:3, 1])
+    assert len({tuple(np.round(c, 4)) for c in closings}) == 2 * PRESS_HOME_TURNS
+
+
 def test_the_multi_peg_oracle_says_why_the_first_peg_cannot_start_when_none_can(monkeypatch):
     from types import SimpleNamespace
 

@@ -850,6 +850,11 @@ STANDING_PEG_SPACING = 0.005
 points on a standing peg's top and knock it out of its socket."""
 
 
+def inserted_fraction(env, peg: int) -> float:
+    """How far in (of its hole's depth) peg ``peg`` is in hole ``peg`` (of the env's ``insertion``)."""
+    return float(env.evaluate()["pair_inserted_fraction"][0, peg, peg])
+
+
 def stayed_in(env, peg: int) -> bool:
     """Whether peg ``peg``, let go, is still in hole ``peg`` (of the env's ``insertion``): at least ``STILL_IN_FRACTION``
     of the way in, with its end within the peg's radius of the hole's axis. A peg may lean in the clearance; one

@@ -11,9 +11,24 @@ from dataclasses import replace
 from typing import Iterator, Optional
 
 import numpy as np
+import sapien
 
-from mani_skill_space.oracles.base import FINE_SCREW_STEP, Oracle, PlanningFailed, collision_vertices, surface_points
-from mani_skill_space.oracles.insertion import InsertionSettings, PegInserter, PegTarget, _frame_holding_tip_over_hole, _twists, end_nearest, other_pegs, stayed_in
+from mani_skill_space.envs.insertion import INSERTED_FRACTION
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, collision_vertices, open_finger_corners, surface_points
+from mani_skill_space.oracles.insertion import (
+    PRESS_DEPTH,
+    SETTLE_STEPS,
+    STILL_IN_FRACTION,
+    InsertionSettings,
+    PegInserter,
+    PegTarget,
+    _frame_holding_tip_over_hole,
+    _twists,
+    end_nearest,
+    inserted_fraction,
+    other_pegs,
+    stayed_in,
+)
 from mani_skill_space.oracles.solar_panel import FREE_SPACE_ACCELERATION
 from mani_skill_space.oracles.solar_panel import PEG_LIFT_HEIGHT as SOLAR_PEG_LIFT_HEIGHT
 from mani_skill_space.oracles.solar_panel import RETREAT_DISTANCES
@@ -59,6 +74,23 @@ wide, not side by side under a panel, and with 2 cm round the three standing the
 and orbit alike) had no grasp from which the arm lines it up with its hole (with 1 cm it goes in; seeds 62000-62029,
 Earth and orbit: 49 -> 51 of 60, none lost)."""
 
+PRESS_HOME_FROM = 0.5
+"""A peg let go at least this far in (of its hole's depth: deep enough that the bore holds it upright) but short of
+``STILL_IN_FRACTION`` (where the plan would end: it did not stay in) is pressed home with the fingertips
+(``MultiPegInHoleOracle._press_home``), and once all four are in, so is any short of the task's ``INSERTED_FRACTION``.
+(Pressing every peg short of that at once cost orbit tuning seed 62077 its last peg's time: its first, let go 81% in,
+was sliding in by itself.)"""
+PRESSED_HOME_FRACTION = 0.97
+"""The press ends once the peg is this far in (the socket's latch holds it from ``INSERTED_FRACTION`` on)."""
+PRESS_HOME_ABOVE = 0.05
+"""How far (m) above the peg's top the fingertips come first, swinging there with the peg as an obstacle."""
+PRESS_HOME_GAP = 0.005
+"""How far (m) above the peg's top the fingertips come down to before the press."""
+PRESS_HOME_STEP = 0.003
+"""How far (m) the fingertips go down a control step as they press."""
+PRESS_HOME_TURNS = 4
+"""Closing directions (about the hole's axis, over half a turn) tried for the pressing hand."""
+
 MULTI_INSERTION_ORDER = (0, 3, 1, 2)
 """Holes in the order they are filled: the outer ones first, so that the arm carrying a peg over an inner module
 has the standing pegs beside it, not in the way of its elbow."""
@@ -90,7 +122,8 @@ peg in the hand)."""
 class MultiPegInHoleOracle(Oracle):
     """Oracle for MultiPegInHoleAssembly-v1: Peg-in-Hole's insertion of each peg into its own hole in turn
     (``MULTI_INSERTION_ORDER``, a peg whose insertion cannot start yet left for later:
-    ``_first_plannable_insertion``), letting go of it and backing straight up before the next, with the modules and
+    ``_first_plannable_insertion``), letting go of it and backing straight up before the next (a peg let go short of
+    the way in is pressed home with the fingertips: ``_press_home``), with the modules and
     the other pegs (those standing with a margin) as the planner's obstacles, and, while a peg is pushed in, the
     modules beside its hole's with ``NEIGHBOUR_MARGIN``."""
 
@@ -119,9 +152,71 @@ class MultiPegInHoleOracle(Oracle):
             standing.append(hole)
             yield from self.open_gently(8)
             yield from self.retreat_up(RETREAT_DISTANCES)
+            if PRESS_HOME_FROM <= inserted_fraction(env, hole) < STILL_IN_FRACTION:  # short of counting as in
+                yield from self._press_home(env, modules, hole, standing)
             if not stayed_in(env, hole):
                 raise PlanningFailed(f"peg {hole} did not stay in its hole")
+        for hole in MULTI_INSERTION_ORDER:  # in, but short of the depth the task asks for
+            if PRESS_HOME_FROM <= inserted_fraction(env, hole) < INSERTED_FRACTION:
+                yield from self._press_home(env, modules, hole, standing)
         yield from self.wait_for_success(20)
+
+    def _press_home(self, env, modules: list, hole: int, standing: list) -> Iterator[np.ndarray]:
+        """Press peg ``hole``, let go short of the way in, the rest of the way with the closed fingertips on its top,
+        pointing down the hole's axis: the hand swings (``joint_move``, at ``FREE_SPACE_ACCELERATION``) to
+        ``PRESS_HOME_ABOVE`` over the top, with the peg as an obstacle, comes down to ``PRESS_HOME_GAP`` over it,
+        presses it home (``PRESS_HOME_STEP`` a step, until it is ``PRESSED_HOME_FRACTION`` in) and backs straight up,
+        opening the fingers. A push whose hand meets the top of the module beside the peg (round a tilted hole that
+        top rises toward the peg on one side) stops short whatever the push tries: on orbit tuning seed 62057 every
+        push of the second peg stopped 74-90% of the way in, the hand on the module as the planner sees it (no IK
+        solution further down), and the peg was let go 74% in. The fingertips on the peg's top stay clear of the
+        module. The planner has the modules and the ``standing`` pegs but this one as obstacles. ``PlanningFailed``
+        where no such hand pose can be reached."""
+        self.make_solver(env, obstacles=self._obstacles(env, modules, hole, tuple(standing)))
+        target = PegTarget.of(env, env.pegs[hole], hole)
+        axis = target.bottom[:3, 2]  # out of the hole
+        ends = target.end_frames()[:, :3, 3]
+        inserted_end = ends[int(np.argmin(np.linalg.norm(ends - target.bottom[:3, 3], axis=1)))]
+        top = inserted_end + axis * target.height
+        reach = float(open_finger_corners(env)[:, 2].max())  # the fingertips' reach past the TCP
+        this_peg = other_pegs([env.pegs[hole]], [env.peg_assets[hole][0]], held=-1, standing=[0], margin=MULTI_PEG_STANDING_MARGIN)
+        start = self.arm_qpos()
+        for pose in self._pressing_poses(top + axis * (reach + PRESS_HOME_ABOVE), axis):
+            with self.obstacles_only(lambda points: np.concatenate([points, this_peg])):
+                goal = self.free_joint_goal(start, pose)
+            if goal is None:
+                continue
+            self.gripper = GRIPPER_CLOSED
+            yield from self.joint_move(goal, "over the peg's top", acceleration=FREE_SPACE_ACCELERATION)
+            yield from self.screw_to(sapien.Pose(top + axis * (reach + PRESS_HOME_GAP), pose.q), "onto the peg's top", SETTLE_STEPS)
+            low = top + axis * reach - axis * ((1.0 - inserted_fraction(env, hole)) * target.depth + PRESS_DEPTH)
+            descent = float((self.tcp_pose().p - low) @ axis)
+            steps = int(np.ceil(max(descent, 0.0) / PRESS_HOME_STEP))
+
+            def pressing(step: int) -> sapien.Pose:
+                return sapien.Pose(low + axis * max(descent - (step + 1) * PRESS_HOME_STEP, 0.0), pose.q)
+
+            yield from self.servo(pressing, steps + SETTLE_STEPS, "press home", until=lambda step: inserted_fraction(env, hole) >= PRESSED_HOME_FRACTION)
+            self.gripper = GRIPPER_OPEN  # opened as the hand backs off, ready for the next peg
+            yield from self.retreat_up(RETREAT_DISTANCES)
+            return
+        raise PlanningFailed(f"no motion to press peg {hole} home")
+
+    def _pressing_poses(self, point: np.ndarray, axis: np.ndarray) -> list[sapien.Pose]:
+        """TCP poses at ``point`` pointing down ``axis`` (out of a hole), the closing direction turned about it in
+        ``PRESS_HOME_TURNS`` steps, each with its half-turned twin, the one whose fingers close nearer the way the hand's
+        close now first."""
+        helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        first = np.cross(axis, helper)
+        first /= np.linalg.norm(first)
+        poses = []
+        for angle in np.linspace(0.0, np.pi, PRESS_HOME_TURNS, endpoint=False):
+            closing = np.cos(angle) * first + np.sin(angle) * np.cross(axis, first)
+            frame = np.eye(4)
+            frame[:3, :3] = np.stack([np.cross(closing, -axis), closing, -axis], axis=1)
+            frame[:3, 3] = point
+            poses.extend(self.closings_nearest_first(sapien.Pose(frame)))
+        return poses
 
     def _first_plannable_insertion(self, env, modules: list, standing: list) -> tuple[int, Iterator[np.ndarray]]:
         """The next peg to insert and its insertion (actions), its first action already planned: the first peg not yet
