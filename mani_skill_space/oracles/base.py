@@ -882,6 +882,16 @@ def at_height(pose: sapien.Pose, height: float) -> sapien.Pose:
     return sapien.Pose([pose.p[0], pose.p[1], height], pose.q)
 
 
+def tcp_pose_with_axes(point: np.ndarray, approach: np.ndarray, closing: np.ndarray) -> sapien.Pose:
+    """The TCP pose at ``point`` with its approach (z) and closing (y) axes (``closing`` made unit; it must be square
+    to ``approach``)."""
+    closing = closing / np.linalg.norm(closing)
+    frame = np.eye(4)
+    frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    frame[:3, 3] = point
+    return sapien.Pose(frame)
+
+
 def wrist_turned(pose: sapien.Pose) -> sapien.Pose:
     """The hand at ``pose`` turned half a turn about its approach axis: the same grip, its fingers swapped."""
     return pose * sapien.Pose(q=HALF_TURN_ABOUT_APPROACH)

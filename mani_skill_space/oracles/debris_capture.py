@@ -26,6 +26,7 @@ from mani_skill_space.oracles.base import (
     finger_pad_rectangle,
     pad_overlap,
     raised,
+    tcp_pose_with_axes,
     top_down_grasp_pose,
 )
 from mani_skill_space.oracles.sample_collection import PRE_GRASP_HEIGHT
@@ -400,7 +401,7 @@ def _along_the_fingers(point: np.ndarray, velocity: np.ndarray, long_axis: np.nd
         if np.linalg.norm(across) >= 0.3:
             approach = across / np.linalg.norm(across)
             break
-    return _hand_pose(point, approach, np.cross(approach, axis))
+    return tcp_pose_with_axes(point, approach, np.cross(approach, axis))
 
 
 def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt: float = 0.0) -> sapien.Pose:
@@ -421,14 +422,4 @@ def _facing(point: np.ndarray, velocity: np.ndarray, long_axis: np.ndarray, tilt
         down /= np.linalg.norm(down)
         approach = np.cos(tilt) * -along + np.sin(tilt) * down
         closing = np.cross(approach, along)
-    return _hand_pose(point, approach, closing)
-
-
-def _hand_pose(point: np.ndarray, approach: np.ndarray, closing: np.ndarray) -> sapien.Pose:
-    """The TCP pose at ``point`` with its approach (z) and closing (y) axes (``closing`` made unit; it must be square
-    to ``approach``)."""
-    closing = closing / np.linalg.norm(closing)
-    frame = np.eye(4)
-    frame[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
-    frame[:3, 3] = point
-    return sapien.Pose(frame)
+    return tcp_pose_with_axes(point, approach, closing)

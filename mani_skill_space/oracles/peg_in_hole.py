@@ -14,7 +14,7 @@ import numpy as np
 import sapien
 
 from mani_skill_space.envs.insertion import INSERTED_FRACTION
-from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, collision_vertices, open_finger_corners, surface_points
+from mani_skill_space.oracles.base import FINE_SCREW_STEP, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, collision_vertices, open_finger_corners, surface_points, tcp_pose_with_axes
 from mani_skill_space.oracles.insertion import (
     PRESS_DEPTH,
     SETTLE_STEPS,
@@ -212,10 +212,7 @@ class MultiPegInHoleOracle(Oracle):
         poses = []
         for angle in np.linspace(0.0, np.pi, PRESS_HOME_TURNS, endpoint=False):
             closing = np.cos(angle) * first + np.sin(angle) * np.cross(axis, first)
-            frame = np.eye(4)
-            frame[:3, :3] = np.stack([np.cross(closing, -axis), closing, -axis], axis=1)
-            frame[:3, 3] = point
-            poses.extend(self.closings_nearest_first(sapien.Pose(frame)))
+            poses.extend(self.closings_nearest_first(tcp_pose_with_axes(point, -axis, closing)))
         return poses
 
     def _first_plannable_insertion(self, env, modules: list, standing: list) -> tuple[int, Iterator[np.ndarray]]:
