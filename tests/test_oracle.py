@@ -1744,6 +1744,29 @@ def test_the_multi_peg_oracle_presses_home_a_peg_its_pushes_left_short():
     assert result.success_once and result.success_at_end, result.failure
 
 
+def test_the_multi_peg_oracle_lines_the_peg_up_again_rather_than_swing_the_arm_onto_another_branch():
+    """Orbit tuning seed 62041: the second peg's screw down to the entrance found no path, the fallback joint move
+    swung the first joint by 2.2 rad to a configuration with the shoulder 0.07 rad from its limit, and every push
+    stopped there, 47% of the way in. The peg is now lined up again (``InsertionSettings.lines_up_again``) and all
+    four go in (without it the episode ends "peg 3 did not stay in its hole")."""
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
+    result = run_episode(env, oracle_for("MultiPegInHoleAssembly-v1"), 62041)
+    env.close()
+    assert result.success_once and result.success_at_end, result.failure
+
+
+def test_a_motion_over_the_hole_that_moves_a_joint_past_the_branch_jump_swings_to_another_branch():
+    from types import SimpleNamespace
+
+    from mani_skill_space.oracles.insertion import OTHER_BRANCH_JUMP, PegInserter
+
+    now = np.zeros(7)
+    inserter = PegInserter.__new__(PegInserter)
+    for arrived, expected in ((None, False), (now + 0.3, False), (now + [0, 0, 0, 0, 0, 0, OTHER_BRANCH_JUMP + 0.01], True), (now - [OTHER_BRANCH_JUMP + 0.5, 0, 0, 0, 0, 0, 0], True)):
+        inserter.oracle = SimpleNamespace(arm_qpos=lambda: now, motion_end=lambda start, pose, arrived=arrived: arrived)
+        assert inserter._swings_to_another_branch(sapien.Pose()) is expected
+
+
 def test_the_pressing_hand_points_down_the_holes_axis():
     """``_pressing_poses``: every pose is at the point, its approach (TCP z) into the hole, its closing axis (y) square
     to it, in ``PRESS_HOME_TURNS`` closing directions, each with its half-turned twin."""

@@ -460,6 +460,8 @@ class Oracle(Policy):
         motion to the pre-grasp pose planned to end with the first joint at -1.91 rad ended at -0.07, the second joint
         at its limit, and the grasp motion planned from the planned end stalled 44 mm short of the peg."""
         arm_path = np.asarray(path)[:, : len(start)]
+        if not len(arm_path):  # mplib's screw of (almost) no length
+            return np.asarray(start)
         if self.arm_follower is None:
             return arm_path[-1]
         return self.arm_follower(start, self.paced(arm_path, start, acceleration))

@@ -113,6 +113,10 @@ ENOUGH_DEPTH_LEFT = 0.05
 90% of the depth)."""
 SETTLE_STEPS = 4
 RETRY_BELOW_FRACTION = 0.9
+OTHER_BRANCH_JUMP = 1.0
+"""rad: a motion of the hand by a few centimetres over the hole that moves a joint this far goes to another branch of
+the arm's inverse kinematics (the line down from ``APPROACH_GAP`` to ``PRE_INSERT_GAP`` moves each joint by at most
+0.3 rad, seed 62041's fallback joint move swung the first by 2.2)."""
 RELAXED_HEIGHT = 0.0005
 """Where the tip is held, above the bottom, while the push eases off before letting go."""
 AXIS_KEEPOUT = 0.04
@@ -232,6 +236,15 @@ class InsertionSettings:
     peg turned 9.5 and 4.3 degrees, the hand took it 9.8 and 4.7 degrees off the planned grip, and no arm
     configuration lined it up with the hole; planned again, 62013 assembles, and 62026 runs out of time on its last
     peg)."""
+    lines_up_again: bool = False
+    """Whether the peg is lined up over its hole again (``PegInserter._line_up``: an arm whose push keeps
+    ``PUSH_JOINT_MARGIN`` from the joint limits, at any twist the profile allows) where the motion down to the
+    entrance would swing the arm onto another branch of its inverse kinematics (``OTHER_BRANCH_JUMP``), or where a
+    jammed push has no motion back off above the entrance (the peg has turned in the hand). Traced on Multi-Peg-in-Hole,
+    orbit, tuning seed 62041: the screw down to the entrance found no path, the fallback joint move took the arm to a
+    configuration with its shoulder 0.07 rad from its limit, and every push stopped there, 47% of the way in; on seeds
+    62020 and 62075 a peg held by its rim turned 85 degrees in the hand as the push began, and the back-off had no
+    motion."""
 
 
 class PegInserter:
@@ -294,10 +307,15 @@ class PegInserter:
             yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
 
         for attempt in range(self.settings.insert_attempts):
+            line_up = attempt == 0
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
                 with self._near_the_hole(target):
-                    yield from self.oracle.screw_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "back off", SETTLE_STEPS)
-            twist = yield from self._push_in(target, end, twist, line_up=attempt == 0)
+                    back_off = self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP))
+                    if self.settings.lines_up_again and self.oracle.motion_end(self.oracle.arm_qpos(), back_off) is None:
+                        line_up = True  # the peg has turned in the hand
+                    else:
+                        yield from self.oracle.screw_to(back_off, "back off", SETTLE_STEPS)
+            twist = yield from self._push_in(target, end, twist, line_up=line_up)
             if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
                 break
         if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
@@ -383,22 +401,38 @@ class PegInserter:
         (``Oracle.settle``): the lift ends with the arm trailing it (Solar Panel Assembly, Earth, procedural, tuning
         seed 64047: no line-up for the last peg from where the lift left the arm, one once it had settled)."""
         if line_up:
-            with self._reaching():
-                try:
-                    swing, twist = self._line_up(target, end, twist)
-                except PlanningFailed:
-                    if not (yield from self.oracle.settle()):
-                        raise
-                    swing, twist = self._line_up(target, end, twist)
-                yield from self._carry_over(swing)
+            twist = yield from self._line_up_and_carry_over(target, end, twist)
         with self._near_the_hole(target):
-            yield from self._lower_in(target, end, twist)
+            lowered = yield from self._lower_in(target, end, twist, keep_branch=self.settings.lines_up_again)
+        if not lowered:  # the way down would have left the arm's branch: line up again, then go down as it comes
+            twist = yield from self._line_up_and_carry_over(target, end, twist)
+            with self._near_the_hole(target):
+                yield from self._lower_in(target, end, twist)
         return twist
 
-    def _lower_in(self, target: PegTarget, end: int, twist: float) -> Iterator[np.ndarray]:
+    def _line_up_and_carry_over(self, target: PegTarget, end: int, twist: float) -> Generator[np.ndarray, None, float]:
+        """Line the peg up over the hole (``_line_up``, again once the arm has settled where there is no line-up from
+        where it is) and carry it there; returns the twist it goes in with."""
+        with self._reaching():
+            try:
+                swing, twist = self._line_up(target, end, twist)
+            except PlanningFailed:
+                if not (yield from self.oracle.settle()):
+                    raise
+                swing, twist = self._line_up(target, end, twist)
+            yield from self._carry_over(swing)
+        return twist
+
+    def _lower_in(self, target: PegTarget, end: int, twist: float, keep_branch: bool = False) -> Generator[np.ndarray, None, bool]:
+        """The tip lined up over the entrance (re-measured ``refine_passes`` more times) and pushed to the bottom;
+        returns False, before any motion that would do it, where ``keep_branch`` and a motion down to the entrance
+        would swing the arm onto another branch of its inverse kinematics (``_swings_to_another_branch``)."""
         bottom, depth = target.bottom, target.depth
         for _ in range(self.settings.refine_passes + 1):  # re-measure the peg in the hand each time: it may have slipped
-            yield from self.oracle.line_to(self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP)), "pre-insert", SETTLE_STEPS)
+            pre_insert = self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP))
+            if keep_branch and self._swings_to_another_branch(pre_insert):
+                return False
+            yield from self.oracle.line_to(pre_insert, "pre-insert", SETTLE_STEPS)
         heights = _push_heights(depth + PRE_INSERT_GAP, self.settings.insert_step)
 
         def tip_goal(step: int) -> sapien.Pose:
@@ -409,6 +443,14 @@ class PegInserter:
         if self.oracle.tcp_speed_limit is not None or self.settings.push_ends_once_seated:
             seated = lambda step: step >= len(heights) and self._tip_height(target, end) <= SEATED_TIP_HEIGHT  # noqa: E731
         yield from self.oracle.servo(tip_goal, len(heights) + SETTLE_STEPS + PUSH_EXTRA_STEPS, "insert", until=seated)
+        return True
+
+    def _swings_to_another_branch(self, pose: sapien.Pose) -> bool:
+        """Whether the oracle's motion from where the arm is to ``pose`` (a few centimetres of the hand's) would move
+        a joint more than ``OTHER_BRANCH_JUMP``."""
+        now = self.oracle.arm_qpos()
+        arrived = self.oracle.motion_end(now, pose)
+        return arrived is not None and float(np.abs(arrived - now).max()) > OTHER_BRANCH_JUMP
 
     @staticmethod
     def _tip_height(target: PegTarget, end: int) -> float:
