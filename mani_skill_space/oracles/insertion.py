@@ -115,8 +115,9 @@ SETTLE_STEPS = 4
 RETRY_BELOW_FRACTION = 0.9
 OTHER_BRANCH_JUMP = 1.0
 """rad: a motion of the hand by a few centimetres over the hole that moves a joint this far goes to another branch of
-the arm's inverse kinematics (the line down from ``APPROACH_GAP`` to ``PRE_INSERT_GAP`` moves each joint by at most
-0.3 rad, seed 62041's fallback joint move swung the first by 2.2)."""
+the arm's inverse kinematics (in the traced orbital tuning episodes the way down from ``APPROACH_GAP`` to the entrance
+moved each joint by 0.1-0.2 rad, 0.7 where the peg had turned 25 degrees in the hand; seed 62041's fallback joint move
+swung the first by 2.2)."""
 RELAXED_HEIGHT = 0.0005
 """Where the tip is held, above the bottom, while the push eases off before letting go."""
 AXIS_KEEPOUT = 0.04
