@@ -1376,7 +1376,12 @@ def _push_in_with_line_ups_failing(failures: int, arm_trails: bool):
     inserter.oracle, inserter.settings, inserter.reach_obstacles = Settling(), InsertionSettings(), None
     inserter._line_up = line_up
     inserter._carry_over = lambda swing: iter([f"carry {swing}"])
-    inserter._lower_in = lambda target, end, twist: iter([f"lower at {twist}"])
+
+    def lower_in(target, end, twist, keep_branch=False):
+        yield f"lower at {twist}"
+        return True  # went down without leaving the arm's branch
+
+    inserter._lower_in = lower_in
     actions, pushing = [], inserter._push_in(None, 0, 0.0, line_up=True)
     try:
         while True:
