@@ -1738,7 +1738,7 @@ def test_the_multi_peg_oracle_presses_home_a_peg_left_part_way_in():
 
     env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
-    hole, phases = 3, []
+    hole, fractions = 3, []
 
     def press_only(env):
         modules = [np.eye(4) for _ in env.pegs]
@@ -1751,15 +1751,15 @@ def test_the_multi_peg_oracle_presses_home_a_peg_left_part_way_in():
         env.pegs[hole].set_linear_velocity(np.zeros(3))
         env.pegs[hole].set_angular_velocity(np.zeros(3))
         yield oracle.hold_action()
-        phases.append(inserted_fraction(env, hole))
+        fractions.append(inserted_fraction(env, hole))
         yield from oracle._press_home(env, modules, hole, [hole])
-        phases.append(inserted_fraction(env, hole))
+        fractions.append(inserted_fraction(env, hole))
 
     oracle.plan = press_only
     run_episode(env, oracle, 62048, stop_when_done=True)
     env.close()
     assert oracle.failure is None, oracle.failure
-    before, after = phases
+    before, after = fractions
     assert 0.55 < before < 0.65
     assert after >= PRESSED_HOME_FRACTION
 
