@@ -1734,16 +1734,14 @@ def test_the_multi_peg_oracle_presses_home_a_peg_left_part_way_in():
     this round's machine orbit tuning seed 62048 left its second peg 88% in and pressed it home from 43%; on the
     previous round's, 62057.)"""
     from mani_skill_space.oracles.insertion import PegTarget, inserted_fraction
-    from mani_skill_space.oracles.peg_in_hole import PRESSED_HOME_FRACTION, seated_poses
+    from mani_skill_space.oracles.peg_in_hole import PRESSED_HOME_FRACTION, module_frames, seated_poses
 
     env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
     hole, fractions = 3, []
 
     def press_only(env):
-        modules = [np.eye(4) for _ in env.pegs]
-        for module, position in zip(modules, env.module_positions):
-            module[:3, 3] = position
+        modules = module_frames(env)
         target = PegTarget.of(env, env.pegs[hole], hole)
         part_way = seated_poses(env, hole, env.agent.robot.pose.sp.p)[0]
         part_way[:3, 3] += target.bottom[:3, 2] * 0.4 * target.depth

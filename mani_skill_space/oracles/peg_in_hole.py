@@ -137,9 +137,7 @@ class MultiPegInHoleOracle(Oracle):
     open ones swept through the tops of standing pegs (seeds 62003 and others: the left finger knocked a peg out)."""
 
     def plan(self, env) -> Iterator[np.ndarray]:
-        modules = [np.eye(4) for _ in env.pegs]
-        for module, position in zip(modules, env.module_positions):
-            module[:3, 3] = position
+        modules = module_frames(env)
         self._wide_modules = np.concatenate(
             [surface_points(env.hole_assets[i][0], module, margin=MODULE_MARGIN, spacing=MODULE_MARGIN) for i, module in enumerate(modules)]
         )
@@ -289,6 +287,14 @@ class MultiPegInHoleOracle(Oracle):
         points = [surface_points(env.hole_assets[i][0], module) for i, module in enumerate(modules)]
         points.append(other_pegs(env.pegs, [assets[0] for assets in env.peg_assets], hole, standing, seated, margin=MULTI_PEG_STANDING_MARGIN))
         return np.concatenate(points)
+
+
+def module_frames(env) -> list[np.ndarray]:
+    """Each hole module's pose (world, 4 x 4): at its position, unturned."""
+    modules = [np.eye(4) for _ in env.pegs]
+    for module, position in zip(modules, env.module_positions):
+        module[:3, 3] = position
+    return modules
 
 
 def seated_poses(env, hole: int, arm_base: np.ndarray) -> list[np.ndarray]:
