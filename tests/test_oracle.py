@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
 from mani_skill_space.oracles.base import FAR_STEP_PACE, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, _finger_box_corners, _trapezoid
-from mani_skill_space.oracles.debris_capture import FAST_SWING, STUCK_CHASE_STEPS
+from mani_skill_space.oracles import debris_capture
+from mani_skill_space.oracles.debris_capture import FAST_SWING, FOLLOW_DISTANCE, STUCK_CHASE_STEPS
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
@@ -105,7 +106,29 @@ class DebrisEpisode(NamedTuple):
     oracle: Oracle
 
 
-def _debris_episode_with_phases(seed: int, asset_source: str = "dataset", difficulty: float = 1.0, domain: str = "orbit") -> DebrisEpisode:
+@contextmanager
+def _follow_only_within_follow_distance():
+    """The follow started, for every body, once its centre was within ``FOLLOW_DISTANCE`` of the hand (without
+    ``FOLLOW_REACH_MARGIN``'s earlier follow of larger bodies), as when the chase's tests' seeds were traced: each
+    seed still sends its episode the way that exercises the chase it tests."""
+    margin = debris_capture.FOLLOW_REACH_MARGIN
+    debris_capture.FOLLOW_REACH_MARGIN = float("-inf")
+    try:
+        yield
+    finally:
+        debris_capture.FOLLOW_REACH_MARGIN = margin
+
+
+def _debris_episode_with_phases(
+    seed: int, asset_source: str = "dataset", difficulty: float = 1.0, domain: str = "orbit", early_follow: bool = False
+) -> DebrisEpisode:
+    """The episode, by default with the follow as the chase's seeds were traced (``_follow_only_within_follow_distance``);
+    given ``early_follow``, as shipped."""
+    with nullcontext() if early_follow else _follow_only_within_follow_distance():
+        return _traced_debris_episode(seed, asset_source, difficulty, domain)
+
+
+def _traced_debris_episode(seed: int, asset_source: str, difficulty: float, domain: str) -> DebrisEpisode:
     env = gym.make("DebrisCapture-v1", domain=domain, asset_source=asset_source, difficulty=difficulty, control_mode="pd_joint_pos", render_backend="none")
     oracle = oracle_for("DebrisCapture-v1")
     steps, far_steps = [], []
@@ -116,6 +139,20 @@ def _debris_episode_with_phases(seed: int, asset_source: str = "dataset", diffic
     env.close()
     phases, grippers, held_steps = (list(column) for column in zip(*steps))
     return DebrisEpisode(result, phases, grippers, held_steps, far_steps, oracle)
+
+
+def test_oracle_follows_a_long_body_once_its_far_end_can_reach_the_hand():
+    """Seed 3037 (the suite's, orbit, a 200 mm peg tumbling at 3 rad/s): followed only once its centre came within
+    ``FOLLOW_DISTANCE``, the peg had struck the waiting hand, and it hung 3 cm beside the fingers, out of their reach,
+    for the whole follow; the chase knocked it away. Followed once its centre is within its radius and
+    ``FOLLOW_REACH_MARGIN`` of the hand, so that the hand is moving with it when it arrives, it is caught (by the chase
+    that follows the follow)."""
+    early = _debris_episode_with_phases(3037, early_follow=True)
+    assert early.result.success_at_end, early.result.failure
+    assert "follow" in early.phases
+    assert early.oracle._debris_radius(early.oracle.env) + debris_capture.FOLLOW_REACH_MARGIN > FOLLOW_DISTANCE
+    late = _debris_episode_with_phases(3037)
+    assert not late.result.success_at_end and "chase" in late.phases
 
 
 @pytest.mark.parametrize("seed", [63100, 63011])  # tuning seeds: both failed before the chase

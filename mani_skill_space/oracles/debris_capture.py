@@ -36,7 +36,12 @@ TIME_STEP = 0.1
 ARRIVAL_MARGIN = 0.6
 """Seconds the hand should be in place before the debris arrives."""
 FOLLOW_DISTANCE = 0.06
-"""Once the debris' centre is this close (m) to the hand, the hand moves with it."""
+"""Once the debris' centre is this close (m) to the hand, the hand moves with it..."""
+FOLLOW_REACH_MARGIN = 0.02
+"""...or, for a larger body, once its centre is within its radius (``_debris_radius``) and this (m) of the hand: a
+tumbling body's far end reaches the hand before its centre comes within ``FOLLOW_DISTANCE``, and struck by the hand
+standing still, a 200 mm peg or a 3U CubeSat drifted off out of the fingers' reach (on the dataset's orbital tuning seeds
+3000-3399, 43 of 400 got away; moving with them from here, 35)."""
 SWEEP_TIME_STEP = 0.1
 HAND_LENGTH = 0.12
 """Debris farther than its radius plus this (m) from the grasp point cannot touch the hand waiting there."""
@@ -321,18 +326,20 @@ class DebrisCaptureOracle(Oracle):
 
     def _wait_for_debris(self, env, meeting: sapien.Pose) -> Generator[np.ndarray, None, bool]:
         """Hold the open hand still at the meeting pose until the debris is close: True once it has arrived (its
-        centre near the grasp point, or touching the hand), False once it moves away from the hand within reach of it
+        centre near the grasp point, ``FOLLOW_DISTANCE`` or, for a larger body, ``FOLLOW_REACH_MARGIN`` beyond its
+        radius, or touching the hand), False once it moves away from the hand within reach of it
         without having arrived (it struck the arm, or passed beside the hand). On a free-flying servicer the swing
         there has moved and turned the bus (a few centimetres and degrees, enough to put the hand beside the debris'
         path), so the hand is servoed back onto the meeting pose, planned from where the bus is now."""
         self.phase = "waiting for the debris"
         free_flyer = getattr(env, "free_flyer", False)
         within_reach = self._debris_radius(env) + HAND_LENGTH
+        follow_distance = max(FOLLOW_DISTANCE, self._debris_radius(env) + FOLLOW_REACH_MARGIN)
         for _ in range(int(LATEST_MEETING / env.control_timestep)):
             position, velocity = self._debris_state(env)
             gap = position - self._tcp_position()
             distance = float(np.linalg.norm(gap))
-            if distance < FOLLOW_DISTANCE or self._touching(env):
+            if distance < follow_distance or self._touching(env):
                 return True
             if distance < within_reach and gap @ velocity > 0:
                 return False
