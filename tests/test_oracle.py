@@ -2,6 +2,7 @@
 
 from contextlib import contextmanager, nullcontext
 from typing import NamedTuple
+from unittest import mock
 
 import gymnasium as gym
 import numpy as np
@@ -106,25 +107,13 @@ class DebrisEpisode(NamedTuple):
     oracle: Oracle
 
 
-@contextmanager
-def _follow_only_within_follow_distance():
-    """The follow started, for every body, once its centre was within ``FOLLOW_DISTANCE`` of the hand (without
-    ``FOLLOW_REACH_MARGIN``'s earlier follow of larger bodies), as when the chase's tests' seeds were traced: each
-    seed still sends its episode the way that exercises the chase it tests."""
-    margin = debris_capture.FOLLOW_REACH_MARGIN
-    debris_capture.FOLLOW_REACH_MARGIN = float("-inf")
-    try:
-        yield
-    finally:
-        debris_capture.FOLLOW_REACH_MARGIN = margin
-
-
 def _debris_episode_with_phases(
     seed: int, asset_source: str = "dataset", difficulty: float = 1.0, domain: str = "orbit", early_follow: bool = False
 ) -> DebrisEpisode:
-    """The episode, by default with the follow as the chase's seeds were traced (``_follow_only_within_follow_distance``);
-    given ``early_follow``, as shipped."""
-    with nullcontext() if early_follow else _follow_only_within_follow_distance():
+    """The episode, by default with the follow starting, for every body, once its centre is within ``FOLLOW_DISTANCE``
+    of the hand (no ``FOLLOW_REACH_MARGIN``), as when the chase's tests' seeds were traced, so that each seed still
+    sends its episode the way that exercises the chase it tests; given ``early_follow``, as shipped."""
+    with nullcontext() if early_follow else mock.patch.object(debris_capture, "FOLLOW_REACH_MARGIN", float("-inf")):
         return _traced_debris_episode(seed, asset_source, difficulty, domain)
 
 
