@@ -41,7 +41,7 @@ FOLLOW_REACH_MARGIN = 0.02
 """...or, for a larger body, once its centre is within its radius (``_debris_radius``) and this (m) of the hand: a
 tumbling body's far end reaches the hand before its centre comes within ``FOLLOW_DISTANCE``, and struck by the hand
 standing still, a 200 mm peg or a 3U CubeSat drifted off out of the fingers' reach (on the dataset's orbital tuning seeds
-3000-3399, 43 of 400 got away; moving with them from here, 35)."""
+3000-3399, 43 of 400 were lost, nearly all of them got away; moving with them from here, 35 were lost)."""
 SWEEP_TIME_STEP = 0.1
 HAND_LENGTH = 0.12
 """Debris farther than its radius plus this (m) from the grasp point cannot touch the hand waiting there."""
