@@ -12,9 +12,9 @@ from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
 from mani_skill_space.oracles import oracle_for
-from mani_skill_space.oracles.base import FAR_STEP_PACE, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, _finger_box_corners, _trapezoid
+from mani_skill_space.oracles.base import FAR_STEP_PACE, GRIPPER_CLOSED, GRIPPER_OPEN, Oracle, PlanningFailed, finger_box_corners, _trapezoid
 from mani_skill_space.oracles import debris_capture
-from mani_skill_space.oracles.debris_capture import FAST_SWING, FOLLOW_DISTANCE, STUCK_CHASE_STEPS
+from mani_skill_space.oracles.debris_capture import FAST_SWING, FOLLOW_DISTANCE, STUCK_CHASE_STEPS, DebrisCaptureOracle
 from mani_skill_space.oracles.insertion import PegInserter
 from mani_skill_space.rollout import run_episode
 
@@ -108,13 +108,16 @@ class DebrisEpisode(NamedTuple):
 
 
 def _debris_episode_with_phases(
-    seed: int, asset_source: str = "dataset", difficulty: float = 1.0, domain: str = "orbit", early_follow: bool = False
+    seed: int, asset_source: str = "dataset", difficulty: float = 1.0, domain: str = "orbit", early_follow: bool = False, fitting_meeting: bool = False
 ) -> DebrisEpisode:
     """The episode, by default with the follow starting, for every body, once its centre is within ``FOLLOW_DISTANCE``
-    of the hand (no ``FOLLOW_REACH_MARGIN``), as when the chase's tests' seeds were traced, so that each seed still
-    sends its episode the way that exercises the chase it tests; given ``early_follow``, as shipped."""
+    of the hand (no ``FOLLOW_REACH_MARGIN``), and with the meeting the first the hand can reach in time whether or not
+    the body will fit the open hand there (``_fits_the_open_hand`` taken to hold everywhere), as when the chase's
+    tests' seeds were traced, so that each seed still sends its episode the way that exercises the chase it tests;
+    given ``early_follow`` and ``fitting_meeting``, as shipped."""
     with nullcontext() if early_follow else mock.patch.object(debris_capture, "FOLLOW_REACH_MARGIN", float("-inf")):
-        return _traced_debris_episode(seed, asset_source, difficulty, domain)
+        with nullcontext() if fitting_meeting else mock.patch.object(DebrisCaptureOracle, "_fits_the_open_hand", lambda *_: True):
+            return _traced_debris_episode(seed, asset_source, difficulty, domain)
 
 
 def _traced_debris_episode(seed: int, asset_source: str, difficulty: float, domain: str) -> DebrisEpisode:
@@ -136,12 +139,49 @@ def test_oracle_follows_a_long_body_once_its_far_end_can_reach_the_hand():
     for the whole follow; the chase knocked it away. Followed once its centre is within its radius and
     ``FOLLOW_REACH_MARGIN`` of the hand, so that the hand is moving with it when it arrives, it is caught (by the chase
     that follows the follow)."""
-    early = _debris_episode_with_phases(3037, early_follow=True)
+    early = _debris_episode_with_phases(3037, early_follow=True, fitting_meeting=True)
     assert early.result.success_at_end, early.result.failure
     assert "follow" in early.phases
     assert early.oracle._debris_radius(early.oracle.env) + debris_capture.FOLLOW_REACH_MARGIN > FOLLOW_DISTANCE
     late = _debris_episode_with_phases(3037)
     assert not late.result.success_at_end and "chase" in late.phases
+
+
+def test_oracle_meets_a_wide_body_where_it_will_fit_the_open_hand():
+    """Tuning seed 3023 at difficulty 0 (a small satellite 151 mm long, its antenna 106 mm, drifting without a tumble):
+    the first meeting the hand could reach in time faced it tilted 60 degrees toward pointing down, where its long
+    axis lay along the hand's approach; it came end first toward the palm, the pads met its edge and the closing
+    fingers flicked it off at 0.5 m/s. Met first where, turned as it will be then, it lies clear of the open fingers and
+    the palm, it is caught."""
+    fitting = _debris_episode_with_phases(3023, asset_source="procedural", difficulty=0.0, early_follow=True, fitting_meeting=True)
+    assert fitting.result.success_at_end, fitting.result.failure
+    first_reachable = _debris_episode_with_phases(3023, asset_source="procedural", difficulty=0.0, early_follow=True)
+    assert not first_reachable.result.success_at_end
+
+
+def test_a_body_fits_the_open_hand_across_its_long_axis_and_not_end_first():
+    """A 200 mm peg (the dataset's, at rest in orbit) centred at the grasp point fits the open hand lying along the
+    pads' width, and not pointing along the approach (into the palm) or across the fingers' gap (through a finger)."""
+    env = gym.make("DebrisCapture-v1", domain="orbit", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    for seed in range(20):
+        env.reset(seed=seed, options=dict(reconfigure=True))
+        oracle = oracle_for("DebrisCapture-v1")
+        oracle.env = env.unwrapped
+        if oracle._elongated(env.unwrapped):
+            break
+    unwrapped = env.unwrapped
+    rotation = unwrapped.debris.pose.sp.to_transformation_matrix()[:3, :3]
+    long_axis = rotation @ oracle._body_long_axis(unwrapped)
+    other = np.cross(long_axis, [0.0, 0.0, 1.0] if abs(long_axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+    other /= np.linalg.norm(other)
+    centre = unwrapped.debris.pose.p[0].numpy()
+    along_the_pads = debris_capture.tcp_pose_with_axes(centre, other, np.cross(other, long_axis))
+    end_first = debris_capture.tcp_pose_with_axes(centre, long_axis, other)
+    across_the_gap = debris_capture.tcp_pose_with_axes(centre, other, long_axis)
+    assert oracle._fits_the_open_hand(unwrapped, along_the_pads, rotation)
+    assert not oracle._fits_the_open_hand(unwrapped, end_first, rotation)
+    assert not oracle._fits_the_open_hand(unwrapped, across_the_gap, rotation)
+    env.close()
 
 
 @pytest.mark.parametrize("seed", [63100, 63011])  # tuning seeds: both failed before the chase
@@ -425,7 +465,7 @@ def multi_peg_oracle():
     env.reset(seed=0)
     oracle = oracle_for("MultiPegInHoleAssembly-v1")
     oracle.reset(env, 0)
-    outer_box = max(_finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
+    outer_box = max(finger_box_corners(env.unwrapped), key=lambda box: np.abs(box[:, 1]).max())
     yield oracle, (oracle.tcp_pose() * sapien.Pose(outer_box.mean(axis=0))).p
     env.close()
 

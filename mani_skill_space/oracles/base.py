@@ -1002,17 +1002,17 @@ def _ground_points() -> np.ndarray:
 
 def open_finger_corners(env) -> np.ndarray:
     """Corners (k, 3) of the open fingers' collision boxes in the TCP frame (the gripper as it is at reset: open)."""
-    return np.concatenate(_finger_box_corners(env))
+    return np.concatenate(finger_box_corners(env))
 
 
 def finger_pad_rectangle(env) -> np.ndarray:
     """The open finger pads' inner faces as a rectangle in the TCP frame's (x, z) plane: ``[[x_min, z_min], [x_max,
     z_max]]`` (the fingers' collision box nearest the closing axis, the pad, of the gripper as it is at reset)."""
-    corners = min(_finger_box_corners(env), key=lambda box: np.abs(box[:, 1]).min())
+    corners = min(finger_box_corners(env), key=lambda box: np.abs(box[:, 1]).min())
     return np.stack([corners[:, [0, 2]].min(axis=0), corners[:, [0, 2]].max(axis=0)])
 
 
-def _finger_box_corners(env) -> list[np.ndarray]:
+def finger_box_corners(env) -> list[np.ndarray]:
     """The corners (8, 3) of each of the fingers' collision boxes, in the TCP frame, with the gripper as it is now."""
     to_tcp = np.linalg.inv(env.agent.tcp.pose.sp.to_transformation_matrix())
     boxes = []

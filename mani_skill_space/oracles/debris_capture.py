@@ -23,6 +23,7 @@ from mani_skill_space.oracles.base import (
     Oracle,
     PlanningFailed,
     collision_part_vertices,
+    finger_box_corners,
     finger_pad_rectangle,
     pad_overlap,
     raised,
@@ -30,6 +31,7 @@ from mani_skill_space.oracles.base import (
     top_down_grasp_pose,
 )
 from mani_skill_space.oracles.sample_collection import PRE_GRASP_HEIGHT
+from mani_skill_space.procgen.polytope import clip
 
 EARLIEST_MEETING = 0.8
 TIME_STEP = 0.1
@@ -52,6 +54,10 @@ closing and the approach (``_along_the_fingers``), so that it neither strikes th
 the fingers' gap."""
 """Grasp orientations tried at each meeting point: fingers against the debris' velocity, then tilted toward
 pointing down."""
+FIT_WINDOW = 2
+"""A meeting is first sought where the body will fit the open hand (``_fits_the_open_hand``) as it turns from this many
+``TIME_STEP``s before it is due there to as many after (its arrival is not timed exactly); a body tumbling fast fits
+nowhere throughout, and is met where the hand can be in time."""
 MOST_FOLLOW_STEPS = 40
 CHASE_LEAD = 0.15
 """Seconds (a control step and the Panda's drives' 0.1 s lag) ahead of the hand that the chase puts its target, so that
@@ -238,22 +244,30 @@ class DebrisCaptureOracle(Oracle):
         shoulder = self.solver.base_pose.p + np.array([0.0, 0.0, SHOULDER_HEIGHT])
         start = self.arm_qpos()
         times = np.arange(EARLIEST_MEETING, LATEST_MEETING, TIME_STEP)
-        long_axes = self._long_axes(env, times)
+        rotations = self._rotations(env, times)
+        long_axes = rotations @ self._body_long_axis(env)
         # a long body is met first where it will lie across its path (so that it comes in between the open fingers
         # rather than end first into the palm), with the hand turned so that it will lie along the pads; failing
-        # those, as a compact one
+        # those, as a compact one; and first of all where, as it will be turned then, it fits the open hand
         passes = ((True, True), (False, True), (False, False)) if self._elongated(env) else ((False, False),)
-        for broadside_only, along_the_fingers in passes:
-            found = self._search_meeting(env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only, along_the_fingers)
-            if found is not None:
-                return found
+        for fitting in (True, False):
+            for broadside_only, along_the_fingers in passes:
+                found = self._search_meeting(
+                    env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only, along_the_fingers, rotations if fitting else None
+                )
+                if found is not None:
+                    return found
         return None
 
-    def _search_meeting(self, env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only: bool, along_the_fingers: bool):
+    def _search_meeting(
+        self, env, start, shoulder, position, velocity, gravity, times, long_axes, broadside_only: bool, along_the_fingers: bool, rotations: Optional[np.ndarray] = None
+    ):
         """The first meeting (grasp pose, arm joints) on the predicted path, or None: where ``broadside_only``, only
         where the long axis lies across the path; where ``along_the_fingers``, only hands that the body will lie
-        along (``_lies_along_the_fingers``), the first of them turned for it (``_along_the_fingers``)."""
-        for t, long_axis in zip(times, long_axes):
+        along (``_lies_along_the_fingers``), the first of them turned for it (``_along_the_fingers``); given the
+        body's ``rotations`` at ``times``, only hands it will fit as it turns on its way in (``_fits_the_open_hand`` at
+        each of the rotations ``FIT_WINDOW`` steps either side of its time there)."""
+        for i, (t, long_axis) in enumerate(zip(times, long_axes)):
             point = position + velocity * t + 0.5 * gravity * t * t
             if point[2] < LOWEST_MEETING_HEIGHT or not REACH[0] <= np.linalg.norm(point - shoulder) <= REACH[1]:
                 continue
@@ -263,6 +277,8 @@ class DebrisCaptureOracle(Oracle):
             for tilt in (ALONG_THE_FINGERS, *TILTS) if along_the_fingers else TILTS:
                 facing = _along_the_fingers(point, heading, long_axis) if tilt == ALONG_THE_FINGERS else _facing(point, heading, long_axis, tilt)
                 if along_the_fingers and not _lies_along_the_fingers(facing, long_axis):
+                    continue
+                if rotations is not None and not all(self._fits_the_open_hand(env, facing, rotation) for rotation in rotations[max(i - FIT_WINDOW, 0) : i + FIT_WINDOW + 1]):
                     continue
                 for pose in self.closings_nearest_first(facing):
                     for arm in self.ik_solutions(pose):
@@ -356,25 +372,49 @@ class DebrisCaptureOracle(Oracle):
         links = (agent.finger1_link, agent.finger2_link, agent.robot.links_map["panda_hand"])
         return any(float(torch.linalg.norm(env.scene.get_pairwise_contact_forces(link, env.debris)[0])) > 0 for link in links)
 
+    def _fits_the_open_hand(self, env, hand: sapien.Pose, rotation: np.ndarray) -> bool:
+        """Whether the debris, turned by ``rotation`` with its centre at the grasp point of ``hand``, lies clear of the
+        open fingers and of the palm (deeper than the fingers' roots), so that it can come in between the pads rather
+        than onto a fingertip, or end first into the palm, as the fingers close on it."""
+        if getattr(self, "_hand_boxes_of", None) is not env.debris:
+            corners = finger_box_corners(env)
+            rotation_now = env.debris.pose.sp.to_transformation_matrix()[:3, :3]
+            centre = self._debris_state(env)[0]
+            self._hand_boxes_of = env.debris
+            self._fingers = [(box.min(axis=0), box.max(axis=0)) for box in corners]
+            self._palm_depth = float(min(box[:, 2].min() for box in corners))
+            self._body_parts = [(part - centre) @ rotation_now for part in collision_part_vertices(env.debris)]
+        to_hand = rotation.T @ hand.to_transformation_matrix()[:3, :3]
+        for part in self._body_parts:
+            local = part @ to_hand
+            if float(local[:, 2].min()) < self._palm_depth or any(_meets_box(local, *finger) for finger in self._fingers):
+                return False
+        return True
+
     @staticmethod
     def _long_axis(env, time: float = 0.0) -> np.ndarray:
         """The debris' longest axis (its bounding box's) as it will point at ``time``, tumbling freely."""
-        return DebrisCaptureOracle._long_axes(env, np.array([time]))[0]
+        return DebrisCaptureOracle._rotations(env, np.array([time]))[0] @ DebrisCaptureOracle._body_long_axis(env)
 
     @staticmethod
-    def _long_axes(env, times: np.ndarray) -> np.ndarray:
-        """(T, 3) the debris' longest axis (its bounding box's) at each of ``times`` (ascending, seconds from now),
-        tumbling freely from its present angular velocity (``debris_paths.tumbling_rotations``: Euler's equations
-        with its own inertia, not a constant angular velocity)."""
+    def _body_long_axis(env) -> np.ndarray:
+        """The debris' longest axis (its bounding box's) in its own frame."""
         from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
 
         box = get_actor_obb(env.debris)
         axis = np.asarray(box.primitive.transform)[:3, int(np.argmax(box.primitive.extents))]
+        return env.debris.pose.sp.to_transformation_matrix()[:3, :3].T @ axis
+
+    @staticmethod
+    def _rotations(env, times: np.ndarray) -> np.ndarray:
+        """(T, 3, 3) the debris' rotations at each of ``times`` (ascending, seconds from now), tumbling freely from its
+        present angular velocity (``debris_paths.tumbling_rotations``: Euler's equations with its own inertia, not a
+        constant angular velocity)."""
         rotation = env.debris.pose.sp.to_transformation_matrix()[:3, :3]
         body = env.debris._bodies[0]
         principal_axes = sapien.Pose(q=body.cmass_local_pose.q).to_transformation_matrix()[:3, :3]
         spin = env.debris.angular_velocity[0].cpu().numpy().astype(np.float64)
-        return tumbling_rotations(rotation, spin, np.asarray(body.inertia), principal_axes, times) @ (rotation.T @ axis)
+        return tumbling_rotations(rotation, spin, np.asarray(body.inertia), principal_axes, times)
 
     @staticmethod
     def _elongated(env) -> bool:
@@ -386,6 +426,13 @@ class DebrisCaptureOracle(Oracle):
     @staticmethod
     def _debris_state(env) -> tuple[np.ndarray, np.ndarray]:
         return env.debris.pose.p[0].cpu().numpy().astype(np.float64), env.debris.linear_velocity[0].cpu().numpy().astype(np.float64)
+
+
+def _meets_box(vertices: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    """Whether the convex polytope with ``vertices`` meets the axis-aligned box from ``low`` to ``high``."""
+    for axis in range(3):
+        vertices = clip(clip(vertices, np.eye(3)[axis], high[axis]), -np.eye(3)[axis], -low[axis])
+    return len(vertices) > 0
 
 
 def _lies_along_the_fingers(hand: sapien.Pose, long_axis: np.ndarray) -> bool:
