@@ -112,11 +112,13 @@ def _debris_episode_with_phases(
 ) -> DebrisEpisode:
     """The episode, by default with the follow starting, for every body, once its centre is within ``FOLLOW_DISTANCE``
     of the hand (no ``FOLLOW_REACH_MARGIN``), and with the meeting the first the hand can reach in time whether or not
-    the body will fit the open hand there (``_fits_the_open_hand`` taken to hold everywhere), as when the chase's
-    tests' seeds were traced, so that each seed still sends its episode the way that exercises the chase it tests;
-    given ``early_follow`` and ``fitting_meeting``, as shipped."""
+    the body will fit the open hand there (``_fits_the_open_hand`` taken to hold everywhere, but for the grasp across a
+    body's thin side, ``ACROSS_THE_THIN_SIDE``, which the search then never takes), as when the chase's tests' seeds were
+    traced, so that each seed still sends its episode the way that exercises the chase it tests; given ``early_follow``
+    and ``fitting_meeting``, as shipped."""
+    first_reachable = lambda self, env, hand, rotation, clear_of_the_palm=True: clear_of_the_palm  # noqa: E731
     with nullcontext() if early_follow else mock.patch.object(debris_capture, "FOLLOW_REACH_MARGIN", float("-inf")):
-        with nullcontext() if fitting_meeting else mock.patch.object(DebrisCaptureOracle, "_fits_the_open_hand", lambda *_: True):
+        with nullcontext() if fitting_meeting else mock.patch.object(DebrisCaptureOracle, "_fits_the_open_hand", first_reachable):
             return _traced_debris_episode(seed, asset_source, difficulty, domain)
 
 
@@ -159,6 +161,34 @@ def test_oracle_meets_a_wide_body_where_it_will_fit_the_open_hand():
     assert not first_reachable.result.success_at_end
 
 
+def test_oracle_takes_a_flat_body_edge_first_between_the_fingers():
+    """Tuning seed 3050 at difficulty 0 (a panel 40 x 130 x 143 mm drifting at 0.08 m/s without a tumble): wider than the
+    fingers are deep, it fits the open hand no way with its centre at the grasp point, and met as before, it came flat
+    against the fingers, was pushed along for the whole follow without coming between them, and the chase knocked it
+    away. Met with the fingers closing across its thin side, it comes edge first between the pads until that edge
+    meets the palm, and is held by it."""
+    edge_first = _debris_episode_with_phases(3050, asset_source="procedural", difficulty=0.0, early_follow=True, fitting_meeting=True)
+    assert edge_first.result.success_at_end, edge_first.result.failure
+    assert edge_first.oracle._tilt == debris_capture.ACROSS_THE_THIN_SIDE
+    fits = DebrisCaptureOracle._fits_the_open_hand
+    never_by_the_thin_side = lambda self, env, hand, rotation, clear_of_the_palm=True: clear_of_the_palm and fits(self, env, hand, rotation)  # noqa: E731
+    with mock.patch.object(DebrisCaptureOracle, "_fits_the_open_hand", never_by_the_thin_side):
+        as_before = _debris_episode_with_phases(3050, asset_source="procedural", difficulty=0.0, early_follow=True, fitting_meeting=True)
+    assert not as_before.result.success_at_end
+
+
+def test_the_grasp_across_a_thin_side_closes_along_it_and_faces_the_path():
+    """``_across_the_thin_side``: the fingers close along the body's thin axis and the hand faces the arriving body as
+    squarely as that allows; where the body arrives along its thin axis (flat on), the hand points down instead."""
+    point, velocity, thin = np.array([0.5, 0.0, 0.5]), np.array([-0.1, 0.0, 0.02]), np.array([0.0, 0.0, 1.0])
+    frame = debris_capture._across_the_thin_side(point, velocity, thin).to_transformation_matrix()
+    np.testing.assert_allclose(frame[:3, 3], point, atol=1e-6)
+    assert abs(frame[:3, 1] @ thin) > 0.999  # closing
+    np.testing.assert_allclose(frame[:3, 2], [1.0, 0.0, 0.0], atol=1e-6)  # approach: against the velocity, less its part along the axis
+    flat_on = debris_capture._across_the_thin_side(point, np.array([-0.1, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])).to_transformation_matrix()
+    np.testing.assert_allclose(flat_on[:3, 2], [0.0, 0.0, -1.0], atol=1e-6)
+
+
 def test_a_body_fits_the_open_hand_across_its_long_axis_and_not_end_first():
     """A 200 mm peg (the dataset's, at rest in orbit) centred at the grasp point fits the open hand lying along the
     pads' width, and not pointing along the approach (into the palm) or across the fingers' gap (through a finger)."""
@@ -171,7 +201,7 @@ def test_a_body_fits_the_open_hand_across_its_long_axis_and_not_end_first():
             break
     unwrapped = env.unwrapped
     rotation = unwrapped.debris.pose.sp.to_transformation_matrix()[:3, :3]
-    long_axis = rotation @ oracle._body_long_axis(unwrapped)
+    long_axis = rotation @ oracle._body_axis(unwrapped, longest=True)
     other = np.cross(long_axis, [0.0, 0.0, 1.0] if abs(long_axis[2]) < 0.9 else [1.0, 0.0, 0.0])
     other /= np.linalg.norm(other)
     centre = unwrapped.debris.pose.p[0].numpy()
