@@ -163,9 +163,9 @@ def test_oracle_meets_a_wide_body_where_it_will_fit_the_open_hand():
 
 def test_oracle_takes_a_flat_body_edge_first_between_the_fingers():
     """Tuning seed 3050 at difficulty 0 (a panel 40 x 130 x 143 mm drifting at 0.08 m/s without a tumble): wider than the
-    fingers are deep, it fits the open hand no way with its centre at the grasp point, and met as before, it came flat
-    against the fingers, was pushed along for the whole follow without coming between them, and the chase knocked it
-    away. Met with the fingers closing across its thin side, it comes edge first between the pads until that edge
+    fingers are deep, it fits the open hand no way with its centre at the grasp point, and met as before, it came against
+    the hand with too little of it between the pads for the fingers to close, was pushed along for the whole follow, and
+    the chase knocked it away. Met with the fingers closing across its thin side, it comes edge first between the pads until that edge
     meets the palm, and is held by it."""
     edge_first = _debris_episode_with_phases(3050, asset_source="procedural", difficulty=0.0, early_follow=True, fitting_meeting=True)
     assert edge_first.result.success_at_end, edge_first.result.failure

@@ -254,12 +254,13 @@ class DebrisCaptureOracle(Oracle):
         times = np.arange(EARLIEST_MEETING, LATEST_MEETING, TIME_STEP)
         rotations = self._rotations(env, times)
         long_axes = rotations @ self._body_axis(env, longest=True)
+        elongated = self._elongated(env)
         spin = float(np.linalg.norm(env.debris.angular_velocity[0].cpu().numpy()))
-        thin_axes = rotations @ self._body_axis(env, longest=False) if not self._elongated(env) and spin <= THIN_SIDE_MOST_SPIN else None
+        thin_axes = rotations @ self._body_axis(env, longest=False) if not elongated and spin <= THIN_SIDE_MOST_SPIN else None
         # a long body is met first where it will lie across its path (so that it comes in between the open fingers
         # rather than end first into the palm), with the hand turned so that it will lie along the pads; failing
         # those, as a compact one; and first of all where, as it will be turned then, it fits the open hand
-        passes = ((True, True), (False, True), (False, False)) if self._elongated(env) else ((False, False),)
+        passes = ((True, True), (False, True), (False, False)) if elongated else ((False, False),)
         for fitting in (True, False):
             for broadside_only, along_the_fingers in passes:
                 found = self._search_meeting(
