@@ -286,6 +286,28 @@ def test_oracle_picks_up_debris_that_came_to_rest_on_the_ground(domain, seed):
     assert "down to the debris on the ground" in episode.phases
 
 
+def test_oracle_goes_over_debris_on_the_ground_by_a_way_that_dips_below_the_hand():
+    """Asteroid dataset tuning seed 3097: a 200 mm peg that got away came to rest on the ground 0.68 m from the rover
+    arm's base, with the hand 7 cm above the ground. Every straight joint move to the pose over the peg took the hand
+    lower on its way, and the oracle gave up. Now, where no way keeps the hand above its height, a way that keeps the
+    arm off the peg's box (``_debris_as_obstacle``, among the planner's obstacles only for that check) will do."""
+    checks = []
+    free_joint_goal = DebrisCaptureOracle.free_joint_goal
+
+    def recorded(self, start, pose, floor=None):
+        goal = free_joint_goal(self, start, pose, floor=floor)
+        checks.append((floor is not None, goal is not None, debris_capture.DEBRIS_AT_REST in self.solver.planner.planning_world.get_normal_object_names()))
+        return goal
+
+    with mock.patch.object(DebrisCaptureOracle, "free_joint_goal", recorded):
+        episode = _debris_episode_with_phases(3097, domain="asteroid", early_follow=True, fitting_meeting=True)
+    assert episode.result.success_at_end, episode.result.failure
+    assert "down to the debris on the ground" in episode.phases
+    assert checks[0] == (True, False, False)  # every way over it dips below the hand
+    assert checks[1] == (False, True, True)  # one clear of the peg, checked with it among the obstacles
+    assert debris_capture.DEBRIS_AT_REST not in episode.oracle.solver.planner.planning_world.get_normal_object_names()
+
+
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back
 def test_oracle_captures_debris_from_a_free_flying_servicer(seed):
     """The swing to the meeting pose moves and turns the bus; the oracle puts the hand back on the debris' path."""

@@ -8,6 +8,7 @@ from above."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from typing import Callable, Generator, Iterator, Optional
 
 import numpy as np
@@ -114,6 +115,8 @@ station's deck may stay there)."""
 
 DEBRIS_BALL = "debris_ball"
 """The planner's collision object standing for the ball the tumbling debris sweeps (``_clear_of_debris``)."""
+DEBRIS_AT_REST = "debris_at_rest"
+"""The planner's collision object standing for debris at rest on the ground (``_debris_as_obstacle``)."""
 
 
 class DebrisCaptureOracle(Oracle):
@@ -162,12 +165,32 @@ class DebrisCaptureOracle(Oracle):
         rock): swing to a pre-grasp pose over it, go down, close the fingers."""
         grasp = top_down_grasp_pose(env, env.debris)
         pre_grasp = raised(grasp, PRE_GRASP_HEIGHT)
-        goal = self.free_joint_goal(self.arm_qpos(), pre_grasp, floor=min(self._tcp_position()[2], pre_grasp.p[2]))
+        start = self.arm_qpos()
+        goal = self.free_joint_goal(start, pre_grasp, floor=min(self._tcp_position()[2], pre_grasp.p[2]))
+        if goal is None:  # every way there dips below the hand's height: one that keeps the arm off the debris will do
+            with self._debris_as_obstacle(env):
+                goal = self.free_joint_goal(start, pre_grasp)
         if goal is None:
             raise PlanningFailed("the debris came to rest on the ground where the hand cannot reach over it")
         yield from self.joint_move(goal, "over the debris on the ground")
         yield from self.screw_to(grasp, "down to the debris on the ground", settle_steps=3)
         yield from self.set_gripper(GRIPPER_CLOSED)
+
+    @contextmanager
+    def _debris_as_obstacle(self, env) -> Iterator[None]:
+        """The debris' oriented bounding box, where it lies now, among the planner's obstacles for the duration."""
+        from mani_skill.examples.motionplanning.base_motionplanner.utils import get_actor_obb
+
+        box = get_actor_obb(env.debris).primitive
+        obstacle = fcl.CollisionObject(fcl.Box(np.asarray(box.extents, dtype=np.float64)))
+        pose = sapien.Pose(np.asarray(box.transform))
+        obstacle.set_transformation(np.concatenate([pose.p, pose.q]))
+        world = self.solver.planner.planning_world
+        world.set_normal_object(DEBRIS_AT_REST, obstacle)
+        try:
+            yield
+        finally:
+            world.remove_normal_object(DEBRIS_AT_REST)
 
     @staticmethod
     def _time_left(env) -> bool:
