@@ -183,7 +183,10 @@ class DebrisCaptureOracle(Oracle):
 
         box = get_actor_obb(env.debris).primitive
         obstacle = fcl.CollisionObject(fcl.Box(np.asarray(box.extents, dtype=np.float64)))
-        pose = sapien.Pose(np.asarray(box.transform))
+        transform = np.array(box.transform, dtype=np.float64)
+        if np.linalg.det(transform[:3, :3]) < 0:  # a mirrored frame bounds the same box: make it a rotation
+            transform[:3, 2] *= -1.0
+        pose = sapien.Pose(transform)
         obstacle.set_transformation(np.concatenate([pose.p, pose.q]))
         world = self.solver.planner.planning_world
         world.set_normal_object(DEBRIS_AT_REST, obstacle)
