@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import sapien
+from mplib.pymp.collision_detection import fcl
 from scipy.spatial.transform import Rotation
 
 from mani_skill_space.envs import SampleCollectionEnv
@@ -306,6 +307,30 @@ def test_oracle_goes_over_debris_on_the_ground_by_a_way_that_dips_below_the_hand
     assert checks[0] == (True, False, False)  # every way over it dips below the hand
     assert checks[1] == (False, True, True)  # one clear of the peg, checked with it among the obstacles
     assert debris_capture.DEBRIS_AT_REST not in episode.oracle.solver.planner.planning_world.get_normal_object_names()
+
+
+def test_debris_at_rest_is_the_planners_obstacle_only_while_checked():
+    """``_debris_as_obstacle`` puts the debris' bounding box, where the debris lies, among the planner's obstacles: a small
+    ball at its centre meets it, one 30 cm off does not; it is gone after the block."""
+    env = gym.make("DebrisCapture-v1", domain="asteroid", asset_source="dataset", control_mode="pd_joint_pos", render_backend="none")
+    env.reset(seed=3097)
+    oracle = oracle_for("DebrisCapture-v1")
+    oracle.reset(env, 3097)
+    oracle.make_solver(env.unwrapped)
+    world = oracle.solver.planner.planning_world
+    centre = env.unwrapped.debris.pose.p[0].cpu().numpy().astype(np.float64)
+
+    def meets(obstacle, point: np.ndarray) -> bool:
+        ball = fcl.CollisionObject(fcl.Sphere(0.005))
+        ball.set_transformation(np.concatenate([point, [1.0, 0.0, 0.0, 0.0]]))
+        return fcl.collide(obstacle, ball, fcl.CollisionRequest()).is_collision()
+
+    with oracle._debris_as_obstacle(env.unwrapped):
+        obstacle = dict(zip(world.get_normal_object_names(), world.get_normal_objects()))[debris_capture.DEBRIS_AT_REST]
+        assert meets(obstacle, centre)
+        assert not meets(obstacle, centre + np.array([0.3, 0.0, 0.0]))
+    assert debris_capture.DEBRIS_AT_REST not in world.get_normal_object_names()
+    env.close()
 
 
 @pytest.mark.parametrize("seed", [8800, 8801])  # the free_flyer suite's first seeds: both missed before the hand was servoed back
