@@ -797,13 +797,6 @@ class Oracle(Policy):
         """The gripper's finger joints now (m)."""
         return self.env.agent.robot.get_qpos()[0, len(self.arm_qpos()) :].cpu().numpy()
 
-    def ease_grip(self, past_hold: float) -> None:
-        """Drive the fingers' target only ``past_hold`` (m) past where they hold the object now, instead of fully
-        closed: the target of the next actions; the fingers press with their PD controller's stiffness times that."""
-        gripper = self.env.agent.controller.controllers["gripper"].config
-        target = float(self.finger_qpos().mean()) - past_hold
-        self.gripper = float(2.0 * (target - gripper.lower) / (gripper.upper - gripper.lower) - 1.0)
-
     def set_gripper(self, state: float, steps: int = 6) -> Iterator[np.ndarray]:
         self.phase = "closing the gripper" if state < self.gripper else "opening the gripper"
         self.gripper = state

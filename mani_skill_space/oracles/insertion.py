@@ -112,8 +112,6 @@ ENOUGH_DEPTH_LEFT = 0.05
 """A push whose tip stops this fraction of the depth above the bottom still inserts the peg (the task asks for
 90% of the depth)."""
 SETTLE_STEPS = 4
-SQUEEZE_STEPS = 3
-"""Steps the fingers take to close fully on an eased grip (``InsertionSettings.carry_grip_ease``) before a push."""
 RETRY_BELOW_FRACTION = 0.9
 OTHER_BRANCH_JUMP = 1.0
 """rad: a motion of the hand by a few centimetres over the hole that moves a joint this far goes to another branch of
@@ -239,10 +237,6 @@ class InsertionSettings:
     peg turned 9.5 and 4.3 degrees, the hand took it 9.8 and 4.7 degrees off the planned grip, and no arm
     configuration lined it up with the hole; planned again, 62013 assembles, and 62026 runs out of time on its last
     peg)."""
-    carry_grip_ease: float = 0.0
-    """Where above 0, how far (m) past where they hold the peg the fingers are driven while it is carried (lift, swing
-    and line-up over the entrance), instead of fully closed; they close fully again just before the push
-    (``SQUEEZE_STEPS``)."""
     lines_up_again: bool = False
     """Whether the peg is lined up over its hole again (``PegInserter._line_up``: an arm whose push keeps
     ``PUSH_JOINT_MARGIN`` from the joint limits, at any twist the profile allows) where the motion down to the
@@ -309,8 +303,6 @@ class PegInserter:
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
         """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
         end, twist = yield from self._grasp(target)
-        if self.settings.carry_grip_ease:
-            self.oracle.ease_grip(self.settings.carry_grip_ease)
         bottom, depth = target.bottom, target.depth
         with self._reaching():
             yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
@@ -442,8 +434,6 @@ class PegInserter:
             if keep_branch and self._swings_to_another_branch(pre_insert):
                 return False
             yield from self.oracle.line_to(pre_insert, "pre-insert", SETTLE_STEPS)
-        if self.oracle.gripper > GRIPPER_CLOSED:
-            yield from self.oracle.set_gripper(GRIPPER_CLOSED, SQUEEZE_STEPS)
         heights = _push_heights(depth + PRE_INSERT_GAP, self.settings.insert_step)
 
         def tip_goal(step: int) -> sapien.Pose:

@@ -103,7 +103,6 @@ MULTI_PEG_INSERTION = InsertionSettings(
     replans_when_the_peg_moved=True,
     push_ends_once_seated=True,
     lines_up_again=True,
-    carry_grip_ease=0.008,
 )
 """Peg-in-Hole's insertion at Solar Panel Assembly's pace (``oracles.solar_panel.PEG_INSERTION``: 4 mm push steps,
 one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at twice the accelerations; at
@@ -113,10 +112,7 @@ peg is let go (in orbit a peg let go while pressed in springs back out). The peg
 hanging from the hand to clear the pegs already standing (as in Solar Panel Assembly). Where a peg has rolled
 between the plan and the hand's arrival over it, its grasp is planned again (``replans_when_the_peg_moved``). A push
 ends once the peg is seated (``push_ends_once_seated``): that ends the episodes 27 of their 800 steps sooner on average
-(orbit tuning seeds), where the pushes that jam and are tried again take most of what is left. The peg is carried in
-an eased grip (``carry_grip_ease``) and squeezed again for the push: shut fingers left a held procedural peg with 3-4
-rad/s of angular velocity that its pose in the hand did not show, and some turned in the hand on the way to the hole
-(orbit, tuning seeds 62055 and 62071; 71 of the 80 tuning seeds assembled before, 73 with it)."""
+(orbit tuning seeds), where the pushes that jam and are tried again take most of what is left."""
 
 
 LIFT_CLEARANCE = 0.05
