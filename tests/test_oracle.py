@@ -1905,6 +1905,55 @@ def test_the_multi_peg_oracle_presses_home_a_peg_left_part_way_in():
     assert after >= PRESSED_HOME_FRACTION
 
 
+def test_the_multi_peg_oracle_grips_a_peg_turned_in_the_hand_again_afloat():
+    """``PegInserter._regrip_afloat`` in orbit: a peg let go over the deck, turned 25 degrees in the open hand about
+    the fingers' closing axis and gripped again so (as a peg that turns in the hand is held), is let go afloat and
+    gripped as the plan meant to hold it. (Set up rather than reached through a seed: which seeds turn a peg in the
+    hand differs from one machine to another.) Where gravity would take it down, the peg is not let go."""
+    from mani_skill_space.oracles.base import at_height
+    from mani_skill_space.oracles.insertion import PegTarget
+    from mani_skill_space.oracles.peg_in_hole import MULTI_PEG_INSERTION, module_frames
+
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    hole, turns, afloat = 0, [], []
+
+    def grip_turn(inserter: PegInserter, target: PegTarget) -> float:
+        """Angle (degrees) between the hand's pose on the peg now and the one the plan took it with."""
+        now = target.peg.pose.sp.inv() * oracle.tcp_pose()
+        return float(np.degrees(Rotation.from_quat((inserter.grasp_on_peg.inv() * now).q[[1, 2, 3, 0]]).magnitude()))
+
+    def regrip_only(env):
+        oracle.make_solver(env, obstacles=oracle._obstacles(env, module_frames(env), hole, ()))
+        inserter = PegInserter(oracle, MULTI_PEG_INSERTION)
+        target = PegTarget.of(env, env.pegs[hole], hole)
+        yield from inserter._grasp(target)
+        yield from oracle.screw_to(at_height(oracle.tcp_pose(), MULTI_PEG_INSERTION.lift_height), "lift")
+        yield from oracle.open_gently()
+        hand = oracle.tcp_pose()
+        turn = sapien.Pose(q=Rotation.from_rotvec([0.0, np.radians(25.0), 0.0]).as_quat()[[3, 0, 1, 2]])
+        env.pegs[hole].set_pose(hand * turn * hand.inv() * env.pegs[hole].pose.sp)
+        env.pegs[hole].set_linear_velocity(np.zeros(3))
+        env.pegs[hole].set_angular_velocity(np.zeros(3))
+        yield from oracle.set_gripper(GRIPPER_CLOSED)
+        yield from oracle.wait_for_grasp(target.peg, "the peg")
+        turns.append(grip_turn(inserter, target))
+        afloat.append(inserter._can_let_go_afloat(target, inserter._end_toward_arm(target)))
+        with mock.patch.object(env.sim_config.scene_config, "gravity", np.array([0.0, 0.0, -1.62])):
+            afloat.append(inserter._can_let_go_afloat(target, inserter._end_toward_arm(target)))
+        yield from inserter._regrip_afloat(target)
+        turns.append(grip_turn(inserter, target))
+
+    oracle.plan = regrip_only
+    run_episode(env, oracle, 62000, stop_when_done=True)
+    env.close()
+    assert oracle.failure is None, oracle.failure
+    assert afloat == [True, False]
+    turned, gripped_again = turns
+    assert turned > 20.0
+    assert gripped_again < 8.0
+
+
 def test_the_multi_peg_oracle_lines_the_peg_up_again_rather_than_swing_the_arm_onto_another_branch():
     """Orbit tuning seed 62041: the second peg's screw down to the entrance found no path, the fallback joint move
     swung the first joint by 2.2 rad to a configuration with the shoulder 0.07 rad from its limit, and every push

@@ -152,6 +152,9 @@ SEATED_TIP_HEIGHT = 0.001
 the tip is this close to the bottom (it then eases off to ``RELAXED_HEIGHT`` anyway), not after all the extra steps:
 traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6021), every peg counted as inserted
 12 steps before its push ended."""
+REGRIP_STEPS = 8
+"""Control steps over which the open hand turns round a peg let go afloat, back to the grasp it was planned to hold
+(``PegInserter._regrip_afloat``)."""
 BACK_TO_THE_START_TOLERANCE = 0.1
 """rad: an arm with every joint this close to where it started the episode is not sent back there to plan a grasp
 (``PegInserter._goes_back_to_the_start``)."""
@@ -246,6 +249,10 @@ class InsertionSettings:
     configuration with its shoulder 0.07 rad from its limit, and every push stopped there, 47% of the way in; on seeds
     62020 and 62075 a peg held by its rim turned 85 degrees in the hand as the push began, and the back-off had no
     motion."""
+    regrips_afloat: int = 0
+    """In zero gravity, how often a held peg whose way over its hole fails before its push has begun (no arm
+    configuration lines it up, or no motion to the pre-insert pose: it has turned in the hand) is let go where it is,
+    afloat, and gripped again as the plan meant to hold it (``PegInserter._regrip_afloat``)."""
 
 
 class PegInserter:
@@ -301,8 +308,43 @@ class PegInserter:
         return self.oracle.obstacles_only(lambda points: np.concatenate([points, self.reach_obstacles]))
 
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
-        """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready)."""
+        """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready); in zero gravity,
+        where the way over the hole fails before the push, let go of the peg afloat and grip it again as planned, up to
+        ``regrips_afloat`` times."""
         end, twist = yield from self._grasp(target)
+        for regrip in itertools.count():
+            try:
+                twist = yield from self._lift_and_push(target, end, twist)
+                break
+            except PlanningFailed:
+                if regrip >= self.settings.regrips_afloat or not self._can_let_go_afloat(target, end):
+                    raise
+            yield from self._regrip_afloat(target)
+        if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
+            yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(target.bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
+
+    def _can_let_go_afloat(self, target: PegTarget, end: int) -> bool:
+        """Whether the peg, still in the hand, would float where it is let go (zero gravity) and has not gone into its hole
+        yet (its tip above the entrance)."""
+        env = self.oracle.env
+        if np.any(np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)) or not bool(env.is_grasping(target.peg)[0]):
+            return False
+        return self._inserted_fraction(target, end) < 0.0
+
+    def _regrip_afloat(self, target: PegTarget) -> Iterator[np.ndarray]:
+        """Let go of the held peg where it is (gently: it floats on with whatever motion it is let go with), bring the open
+        hand round it, over ``REGRIP_STEPS``, to the grasp the plan took it with (``grasp_on_peg``, in the peg's frame,
+        following the peg as it drifts), and close the fingers on it again."""
+        yield from self.oracle.open_gently()
+        start = self.oracle.tcp_pose()
+        planned = lambda: _pose_of(target.peg) * self.grasp_on_peg  # noqa: E731
+        yield from self.oracle.servo(lambda step: _between(start, planned(), min(1.0, (step + 1) / REGRIP_STEPS)), REGRIP_STEPS + SETTLE_STEPS, "regrip")
+        yield from self.oracle.set_gripper(GRIPPER_CLOSED)
+        yield from self.oracle.wait_for_grasp(target.peg, "the peg")
+
+    def _lift_and_push(self, target: PegTarget, end: int, twist: float) -> Generator[np.ndarray, None, float]:
+        """Lift the held peg, line it up over the hole and push it in (again, backing off, where a push jams short of
+        ``RETRY_BELOW_FRACTION``, up to ``insert_attempts`` pushes); returns the twist it went in with."""
         bottom, depth = target.bottom, target.depth
         with self._reaching():
             yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
@@ -319,8 +361,7 @@ class PegInserter:
             twist = yield from self._push_in(target, end, twist, line_up=line_up)
             if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
                 break
-        if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
-            yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
+        return twist
 
     def _grasp(self, target: PegTarget) -> Generator[np.ndarray, None, tuple[int, float]]:
         """Plan the insertion and take the peg with its grasp, up to ``GRASP_ATTEMPTS`` times (each planned from where
@@ -343,6 +384,7 @@ class PegInserter:
                 yield from self.oracle.set_gripper(GRIPPER_CLOSED)
                 try:
                     yield from self.oracle.wait_for_grasp(target.peg, "the peg")
+                    self.grasp_on_peg = grasp_on_peg
                     return end, twist
                 except GraspMissed:
                     missed.append(grasp_on_peg)
@@ -948,6 +990,26 @@ def _peg_moved(target: PegTarget, grasp: sapien.Pose, grasp_on_peg: sapien.Pose)
     grasp in the peg's frame then): the grasp carried with the peg to where it lies now is that far from it."""
     moved = target.peg.pose.sp * grasp_on_peg
     return not poses_within((grasp.p, grasp.q), (moved.p, moved.q), PEG_MOVED)
+
+
+def _pose_of(actor) -> sapien.Pose:
+    """``actor``'s pose now (world; the first env)."""
+    return actor.pose.sp
+
+
+def _between(start: sapien.Pose, end: sapien.Pose, fraction: float) -> sapien.Pose:
+    """The pose ``fraction`` of the way from ``start`` to ``end``: its position on the line between them, its
+    orientation on the shortest arc (spherical linear interpolation of the quaternions)."""
+    q0, q1 = np.asarray(start.q, dtype=np.float64), np.asarray(end.q, dtype=np.float64)
+    cos = float(q0 @ q1)
+    if cos < 0.0:
+        q1, cos = -q1, -cos
+    angle = np.arccos(min(cos, 1.0))
+    if angle < 1e-6:
+        q = q1
+    else:
+        q = (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
+    return sapien.Pose(start.p + fraction * (end.p - start.p), q / np.linalg.norm(q))
 
 
 def _in_frame_of(actor, pose: sapien.Pose) -> sapien.Pose:
