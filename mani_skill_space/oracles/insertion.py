@@ -25,6 +25,7 @@ from typing import Any, Callable, Generator, Iterable, Iterator, Optional, Seque
 
 import numpy as np
 import sapien
+from scipy.spatial.transform import Rotation, Slerp
 
 from mani_skill_space.envs.insertion import SIDE_TOLERANCE
 from mani_skill_space.oracles.base import (
@@ -273,6 +274,8 @@ class PegInserter:
         self.push_obstacles = push_obstacles
         self.finger_corners = open_finger_corners(oracle.env)
         self.finger_pad = finger_pad_rectangle(oracle.env)
+        self.grasp_on_peg: Optional[sapien.Pose] = None
+        """The hand's pose, in the peg's frame, of the grasp that took the peg (``_grasp``)."""
         self.planned_arm: Optional[np.ndarray] = None
         """The arm configuration over the hole that the plan found (its IK seeds the line-up with the peg as it
         really sits in the hand: from elsewhere the solver may find no solution a few millimetres away)."""
@@ -337,7 +340,7 @@ class PegInserter:
         following the peg as it drifts), and close the fingers on it again."""
         yield from self.oracle.open_gently()
         start = self.oracle.tcp_pose()
-        planned = lambda: _pose_of(target.peg) * self.grasp_on_peg  # noqa: E731
+        planned = lambda: target.peg.pose.sp * self.grasp_on_peg  # noqa: E731
         yield from self.oracle.servo(lambda step: _between(start, planned(), min(1.0, (step + 1) / REGRIP_STEPS)), REGRIP_STEPS + SETTLE_STEPS, "regrip")
         yield from self.oracle.set_gripper(GRIPPER_CLOSED)
         yield from self.oracle.wait_for_grasp(target.peg, "the peg")
@@ -992,24 +995,12 @@ def _peg_moved(target: PegTarget, grasp: sapien.Pose, grasp_on_peg: sapien.Pose)
     return not poses_within((grasp.p, grasp.q), (moved.p, moved.q), PEG_MOVED)
 
 
-def _pose_of(actor) -> sapien.Pose:
-    """``actor``'s pose now (world; the first env)."""
-    return actor.pose.sp
-
-
 def _between(start: sapien.Pose, end: sapien.Pose, fraction: float) -> sapien.Pose:
     """The pose ``fraction`` of the way from ``start`` to ``end``: its position on the line between them, its
-    orientation on the shortest arc (spherical linear interpolation of the quaternions)."""
-    q0, q1 = np.asarray(start.q, dtype=np.float64), np.asarray(end.q, dtype=np.float64)
-    cos = float(q0 @ q1)
-    if cos < 0.0:
-        q1, cos = -q1, -cos
-    angle = np.arccos(min(cos, 1.0))
-    if angle < 1e-6:
-        q = q1
-    else:
-        q = (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
-    return sapien.Pose(start.p + fraction * (end.p - start.p), q / np.linalg.norm(q))
+    orientation on the shortest arc between theirs."""
+    turns = Rotation.from_quat(np.array([start.q, end.q])[:, [1, 2, 3, 0]])
+    turn = Slerp([0.0, 1.0], turns)([fraction]).as_quat()[0]
+    return sapien.Pose(start.p + fraction * (end.p - start.p), turn[[3, 0, 1, 2]])
 
 
 def _in_frame_of(actor, pose: sapien.Pose) -> sapien.Pose:
