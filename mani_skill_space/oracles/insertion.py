@@ -251,9 +251,10 @@ class InsertionSettings:
     62020 and 62075 a peg held by its rim turned 85 degrees in the hand as the push began, and the back-off had no
     motion."""
     regrips_afloat: int = 0
-    """In zero gravity, how often a held peg whose way over its hole fails before its push has begun (no arm
-    configuration lines it up, or no motion to the pre-insert pose: it has turned in the hand) is let go where it is,
-    afloat, and gripped again as the plan meant to hold it (``PegInserter._regrip_afloat``)."""
+    """In zero gravity, how often a held peg whose way over its hole fails with its tip still above the entrance (no
+    arm configuration lines it up, or no motion to the pre-insert pose: it has turned in the hand; before a push, or
+    backing off after one that jammed) is let go where it is, afloat, and gripped again as the plan meant to hold it
+    (``PegInserter._regrip_afloat``)."""
 
 
 class PegInserter:
@@ -312,8 +313,8 @@ class PegInserter:
 
     def insert(self, target: PegTarget) -> Iterator[np.ndarray]:
         """Grasp the peg, line it up over the hole and push it to the bottom (the solver must be ready); in zero gravity,
-        where the way over the hole fails before the push, let go of the peg afloat and grip it again as planned, up to
-        ``regrips_afloat`` times."""
+        where the way over the hole fails with the peg's tip above the entrance, let go of the peg afloat and grip it
+        again as planned, up to ``regrips_afloat`` times."""
         end, twist = yield from self._grasp(target)
         for regrip in itertools.count():
             try:
