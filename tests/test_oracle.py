@@ -1910,8 +1910,8 @@ def test_the_multi_peg_oracle_grips_a_peg_turned_in_the_hand_again_afloat():
     the fingers' closing axis and gripped again so (as a peg that turns in the hand is held), is let go afloat and
     gripped as the plan meant to hold it. (Set up rather than reached through a seed: which seeds turn a peg in the
     hand differs from one machine to another.) Where gravity would take it down, the peg is not let go."""
-    from mani_skill_space.oracles.base import at_height
-    from mani_skill_space.oracles.insertion import PegTarget
+    from mani_skill_space.oracles.base import at_height, turn_between
+    from mani_skill_space.oracles.insertion import PegTarget, _in_frame_of
     from mani_skill_space.oracles.peg_in_hole import MULTI_PEG_INSERTION, module_frames
 
     env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
@@ -1920,8 +1920,7 @@ def test_the_multi_peg_oracle_grips_a_peg_turned_in_the_hand_again_afloat():
 
     def grip_turn(inserter: PegInserter, target: PegTarget) -> float:
         """Angle (degrees) between the hand's pose on the peg now and the one the plan took it with."""
-        now = target.peg.pose.sp.inv() * oracle.tcp_pose()
-        return float(np.degrees(Rotation.from_quat((inserter.grasp_on_peg.inv() * now).q[[1, 2, 3, 0]]).magnitude()))
+        return float(np.degrees(turn_between(_in_frame_of(target.peg, oracle.tcp_pose()).q, inserter.grasp_on_peg.q)))
 
     def regrip_only(env):
         oracle.make_solver(env, obstacles=oracle._obstacles(env, module_frames(env), hole, ()))
