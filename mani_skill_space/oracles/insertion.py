@@ -156,6 +156,15 @@ traced on Solar Panel Assembly in ``pd_ee_delta_pose`` (procedural, Moon, seed 6
 REGRIP_STEPS = 8
 """Control steps over which the open hand turns round a peg let go afloat, back to the grasp it was planned to hold
 (``PegInserter._regrip_afloat``)."""
+GRIP_SHIFT_FROM = 0.5
+"""A peg pushed at least this far in (of its hole's depth: deep enough that the bore holds it upright) and stopped by
+the fingers on the surface round the hole may be let go and gripped again farther up (``PegInserter._shift_grip_afloat``)."""
+GRIP_SHIFT_MARGIN = 0.003
+"""m: the grip shifted up a peg whose fingers met the surface round its hole leaves them this much more than
+``SURFACE_CLEARANCE`` above that surface with the peg at the bottom."""
+GRIP_SHIFT_OVERLAP = 0.4
+"""The grip shifted up the peg keeps at least this share of a finger pad on it (``pad_overlap``): less than a grasp
+that lifts a lying peg (``FIRM_PAD_OVERLAP``), as the bore holds the peg upright and the pads only push it in."""
 BACK_TO_THE_START_TOLERANCE = 0.1
 """rad: an arm with every joint this close to where it started the episode is not sent back there to plan a grasp
 (``PegInserter._goes_back_to_the_start``)."""
@@ -250,6 +259,11 @@ class InsertionSettings:
     configuration with its shoulder 0.07 rad from its limit, and every push stopped there, 47% of the way in; on seeds
     62020 and 62075 a peg held by its rim turned 85 degrees in the hand as the push began, and the back-off had no
     motion."""
+    shifts_grip_afloat: bool = False
+    """Whether, in zero gravity, a held peg whose push the fingers stop on the surface round the hole (the grasp
+    leaves them less than ``SURFACE_CLEARANCE`` above it with the peg at the bottom: a last-resort grasp, or one the
+    peg slipped in) at least ``GRIP_SHIFT_FROM`` of the way in is let go there and gripped again farther up the
+    peg before the next push (``PegInserter._shift_grip_afloat``)."""
     regrips_afloat: int = 0
     """In zero gravity, how often a held peg whose way over its hole fails with its tip still above the entrance (no
     arm configuration lines it up, or no motion to the pre-insert pose: it has turned in the hand; before a push, or
@@ -327,21 +341,25 @@ class PegInserter:
         if self.settings.relax_steps:  # stop pressing, so that the peg rests where it is when let go
             yield from self.oracle.servo(lambda step: self._tcp_for_tip(target, end, _along_axis(target.bottom, twist, RELAXED_HEIGHT)), self.settings.relax_steps, "relax")
 
+    def _afloat(self) -> bool:
+        """Whether a peg let go floats where it is (zero gravity)."""
+        return not np.any(np.asarray(self.oracle.env.sim_config.scene_config.gravity, dtype=np.float64))
+
     def _can_let_go_afloat(self, target: PegTarget, end: int) -> bool:
         """Whether the peg, still in the hand, would float where it is let go (zero gravity) and has not gone into its hole
         yet (its tip above the entrance)."""
-        env = self.oracle.env
-        if np.any(np.asarray(env.sim_config.scene_config.gravity, dtype=np.float64)) or not bool(env.is_grasping(target.peg)[0]):
+        if not self._afloat() or not bool(self.oracle.env.is_grasping(target.peg)[0]):
             return False
         return self._inserted_fraction(target, end) < 0.0
 
-    def _regrip_afloat(self, target: PegTarget) -> Iterator[np.ndarray]:
+    def _regrip_afloat(self, target: PegTarget, grasp_on_peg: Optional[sapien.Pose] = None) -> Iterator[np.ndarray]:
         """Let go of the held peg where it is (gently: it floats on with whatever motion it is let go with), bring the open
-        hand round it, over ``REGRIP_STEPS``, to the grasp the plan took it with (``grasp_on_peg``, in the peg's frame,
-        following the peg as it drifts), and close the fingers on it again."""
+        hand round it, over ``REGRIP_STEPS``, to ``grasp_on_peg`` (in the peg's frame, following the peg as it drifts;
+        by default the grasp the plan took it with, ``self.grasp_on_peg``), and close the fingers on it again."""
+        grasp_on_peg = self.grasp_on_peg if grasp_on_peg is None else grasp_on_peg
         yield from self.oracle.open_gently()
         start = self.oracle.tcp_pose()
-        planned = lambda: target.peg.pose.sp * self.grasp_on_peg  # noqa: E731
+        planned = lambda: target.peg.pose.sp * grasp_on_peg  # noqa: E731
         yield from self.oracle.servo(lambda step: _between(start, planned(), min(1.0, (step + 1) / REGRIP_STEPS)), REGRIP_STEPS + SETTLE_STEPS, "regrip")
         yield from self.oracle.set_gripper(GRIPPER_CLOSED)
         yield from self.oracle.wait_for_grasp(target.peg, "the peg")
@@ -356,6 +374,8 @@ class PegInserter:
         for attempt in range(self.settings.insert_attempts):
             line_up = attempt == 0
             if attempt:  # jammed on the rim: back off above the entrance and go again, re-measuring the peg
+                if self._fingers_stop_the_push(target, end):
+                    yield from self._shift_grip_afloat(target, end)
                 with self._near_the_hole(target):
                     back_off = self._tcp_for_tip(target, end, _along_axis(bottom, twist, depth + PRE_INSERT_GAP))
                     if self.settings.lines_up_again and self.oracle.motion_end(self.oracle.arm_qpos(), back_off) is None:
@@ -363,9 +383,43 @@ class PegInserter:
                     else:
                         yield from self.oracle.screw_to(back_off, "back off", SETTLE_STEPS)
             twist = yield from self._push_in(target, end, twist, line_up=line_up)
-            if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION:
+            if self._inserted_fraction(target, end) >= RETRY_BELOW_FRACTION and not self._fingers_stop_the_push(target, end):
                 break
         return twist
+
+    def _fingers_stop_the_push(self, target: PegTarget, end: int) -> bool:
+        """Where the settings ask (``shifts_grip_afloat``), whether the held peg, floating where it would be let go (zero
+        gravity), in its hole at least ``GRIP_SHIFT_FROM`` of the way but not seated, is held so that the fingers come
+        down to less than ``SURFACE_CLEARANCE`` above the surface round the hole before it is (``_grip_clearance``),
+        and the grip shifted up clear of it (``_shifted_grip``) still holds the peg (``GRIP_SHIFT_OVERLAP``)."""
+        if not (self.settings.shifts_grip_afloat and self._afloat() and bool(self.oracle.env.is_grasping(target.peg)[0])):
+            return False
+        if self._inserted_fraction(target, end) < GRIP_SHIFT_FROM or self._tip_height(target, end) <= SEATED_TIP_HEIGHT:
+            return False
+        if self._grip_clearance(target, end) >= SURFACE_CLEARANCE:
+            return False
+        return pad_overlap(self._shifted_grip(target, end), collision_vertices(target.peg), self.finger_pad) >= GRIP_SHIFT_OVERLAP
+
+    def _grip_clearance(self, target: PegTarget, end: int) -> float:
+        """How far (m) the fingers holding the peg as the hand does now would stay above the surface round the hole with
+        the peg pushed down its axis to the bottom (``_surface_clearance``; negative: below it)."""
+        hand = self.oracle.tcp_pose()
+        pressed = hand.to_transformation_matrix()
+        pressed[:3, 3] -= target.bottom[:3, 2] * self._tip_height(target, end)
+        return self._surface_clearance(target, pressed, _grip_half_width(hand, collision_vertices(target.peg)))
+
+    def _shifted_grip(self, target: PegTarget, end: int) -> sapien.Pose:
+        """The hand (world) moved up the peg's axis, away from its tip, far enough to leave the fingers
+        ``GRIP_SHIFT_MARGIN`` more than ``SURFACE_CLEARANCE`` above the surface round the hole with the peg at the bottom
+        (the surface is level, the axis tilted with the hole)."""
+        rise = SURFACE_CLEARANCE + GRIP_SHIFT_MARGIN - self._grip_clearance(target, end)
+        hand, axis = self.oracle.tcp_pose(), target.end_frames()[end][:3, 2]  # from the tip into the peg
+        return sapien.Pose(hand.p + axis * rise / max(float(target.bottom[2, 2]), 0.5), hand.q)
+
+    def _shift_grip_afloat(self, target: PegTarget, end: int) -> Iterator[np.ndarray]:
+        """Let go of the peg stopped in its hole by the fingers on the surface round it (``_fingers_stop_the_push``) and
+        grip it again farther up its axis (``_shifted_grip``, ``_regrip_afloat``)."""
+        yield from self._regrip_afloat(target, _in_frame_of(target.peg, self._shifted_grip(target, end)))
 
     def _grasp(self, target: PegTarget) -> Generator[np.ndarray, None, tuple[int, float]]:
         """Plan the insertion and take the peg with its grasp, up to ``GRASP_ATTEMPTS`` times (each planned from where

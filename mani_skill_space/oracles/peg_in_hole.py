@@ -104,6 +104,7 @@ MULTI_PEG_INSERTION = InsertionSettings(
     push_ends_once_seated=True,
     lines_up_again=True,
     regrips_afloat=1,
+    shifts_grip_afloat=True,
 )
 """Peg-in-Hole's insertion at Solar Panel Assembly's pace (``oracles.solar_panel.PEG_INSERTION``: 4 mm push steps,
 one re-measuring pass over the entrance, the empty hand to the pre-grasp pose at twice the accelerations; at
