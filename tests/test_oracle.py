@@ -1953,6 +1953,42 @@ def test_the_multi_peg_oracle_grips_a_peg_turned_in_the_hand_again_afloat():
     assert gripped_again < 8.0
 
 
+def test_the_multi_peg_oracle_grips_a_peg_the_fingers_stop_at_the_surface_again_farther_up_afloat():
+    """``PegInserter._shift_grip_afloat`` in orbit: orbit tuning seed 62026's third peg (taken here first, alone) has no
+    grasp that keeps the fingers clear of the surface round its tilted hole, and the last resort's push stops short of
+    the latch, a finger on the module. The peg is let go in its hole and gripped again farther up, and the next push
+    puts it in. Where gravity would take it down, the grip is not shifted."""
+    from mani_skill_space.envs.insertion import INSERTED_FRACTION
+    from mani_skill_space.oracles.insertion import SURFACE_CLEARANCE, PegTarget, inserted_fraction
+    from mani_skill_space.oracles.peg_in_hole import MULTI_PEG_INSERTION, module_frames
+
+    env = gym.make("MultiPegInHoleAssembly-v1", domain="orbit", asset_source="procedural", control_mode="pd_joint_pos", render_backend="none")
+    oracle = oracle_for("MultiPegInHoleAssembly-v1")
+    hole, stopped, under_gravity, inserted = 2, [], [], []
+    shift = PegInserter._shift_grip_afloat
+
+    def recorded_shift(inserter: PegInserter, target: PegTarget, end: int):
+        stopped.append((inserter._inserted_fraction(target, end), inserter._grip_clearance(target, end)))
+        with mock.patch.object(inserter.oracle.env.sim_config.scene_config, "gravity", np.array([0.0, 0.0, -1.62])):
+            under_gravity.append(inserter._fingers_stop_the_push(target, end))
+        yield from shift(inserter, target, end)
+
+    def this_peg_only(env):
+        oracle.make_solver(env, obstacles=oracle._obstacles(env, module_frames(env), hole, ()))
+        yield from PegInserter(oracle, MULTI_PEG_INSERTION).insert(PegTarget.of(env, env.pegs[hole], hole))
+        inserted.append(inserted_fraction(env, hole))
+
+    oracle.plan = this_peg_only
+    with mock.patch.object(PegInserter, "_shift_grip_afloat", recorded_shift):
+        run_episode(env, oracle, 62026, stop_when_done=True)
+    env.close()
+    assert oracle.failure is None, oracle.failure
+    assert len(stopped) == 1 and under_gravity == [False]
+    fraction, clearance = stopped[0]
+    assert fraction < INSERTED_FRACTION and clearance < SURFACE_CLEARANCE
+    assert inserted[0] >= INSERTED_FRACTION
+
+
 def test_the_multi_peg_oracle_lines_the_peg_up_again_rather_than_swing_the_arm_onto_another_branch():
     """Orbit tuning seed 62041: the second peg's screw down to the entrance found no path, the fallback joint move
     swung the first joint by 2.2 rad to a configuration with the shoulder 0.07 rad from its limit, and every push
