@@ -366,7 +366,9 @@ class PegInserter:
 
     def _lift_and_push(self, target: PegTarget, end: int, twist: float) -> Generator[np.ndarray, None, float]:
         """Lift the held peg, line it up over the hole and push it in (again, backing off, where a push jams short of
-        ``RETRY_BELOW_FRACTION``, up to ``insert_attempts`` pushes); returns the twist it went in with."""
+        ``RETRY_BELOW_FRACTION`` or the fingers stop it on the surface round the hole, up to ``insert_attempts`` pushes;
+        in the latter case, afloat, gripped farther up first: ``_shift_grip_afloat``); returns the twist it went in
+        with."""
         bottom, depth = target.bottom, target.depth
         with self._reaching():
             yield from self.oracle.screw_to(at_height(self.oracle.tcp_pose(), self.settings.lift_height), "lift", acceleration=self.carry_acceleration)
